@@ -1,0 +1,36 @@
+# The two commands: `make demo` (main job) and `make test` (whole test suite). Each installs missing
+# Debian packages, configures, builds (Release, -j2) and runs.
+BUILD ?= build
+JOBS ?= 2
+CMAKE_FLAGS ?=
+
+.PHONY: deps configure build demo test bench sanitize clean
+
+deps:
+	@bash scripts/install-deps.sh
+
+configure: deps
+	@cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release $(CMAKE_FLAGS) >/dev/null
+
+build: configure
+	@cmake --build $(BUILD) -j$(JOBS)
+
+demo: build
+	$(BUILD)/bin/physreg demo -o demo-out
+
+test: build
+	cd $(BUILD) && ctest --output-on-failure -j$(JOBS)
+
+# Benchmarks write JSON under bench/results/ (see bench/README.md).
+bench: build
+	@mkdir -p bench/results
+	$(BUILD)/bin/bench_meshing --benchmark_out=bench/results/bench_meshing.json --benchmark_out_format=json
+
+# The test suite under AddressSanitizer + UndefinedBehaviorSanitizer.
+sanitize: deps
+	@cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPHYSREG_SANITIZE=ON -DPHYSREG_BUILD_BENCHMARKS=OFF >/dev/null
+	@cmake --build build-asan -j$(JOBS)
+	cd build-asan && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 ctest --output-on-failure -j$(JOBS)
+
+clean:
+	rm -rf $(BUILD) build-asan demo-out

@@ -1,0 +1,42 @@
+#pragma once
+// Shared pieces of the physreg subcommands: JSON summaries, option checks, output paths.
+#include <CLI/CLI.hpp>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "physreg/image/image_geometry.hpp"
+#include "physreg/mesh/components.hpp"
+#include "physreg/mesh/quality.hpp"
+#include "physreg/mesh/volume_mesh.hpp"
+#include "physreg/model/tissue_table.hpp"
+
+namespace physreg::cli {
+
+struct CommonOptions {
+    bool json = false; ///< print a JSON summary on stdout (logs stay on stderr)
+};
+
+void add_subcommand_mesh(CLI::App& app);
+void add_subcommand_coarsen(CLI::App& app);
+void add_subcommand_info(CLI::App& app);
+void add_subcommand_landmarks(CLI::App& app);
+void add_subcommand_convert(CLI::App& app);
+void add_subcommand_demo(CLI::App& app);
+
+nlohmann::json to_json(const ImageGeometry& geometry);
+nlohmann::json to_json(const HexGrid& grid);
+nlohmann::json to_json(const MeshQuality& quality);
+nlohmann::json to_json(const ComponentReport& report);
+nlohmann::json mesh_summary(const VolumeMesh& mesh, const TissueTable* tissues = nullptr);
+
+/// Prints `summary` as JSON on stdout when --json was given, else a short human line on stderr.
+void report(const CommonOptions& options, const nlohmann::json& summary);
+
+/// The tissue table from --tissues, or paper 000's default (labels 1, 2, 3) with a log line.
+TissueTable load_tissues(const std::string& path);
+
+/// Fails unless the output's directory exists (checked before any work is done).
+void check_output_path(const std::filesystem::path& path, const std::string& option);
+
+} // namespace physreg::cli

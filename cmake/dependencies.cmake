@@ -1,0 +1,16 @@
+# Every dependency comes from a Debian 12 package (see scripts/install-deps.sh); nothing is
+# downloaded at configure time.
+find_package(Eigen3 3.4 REQUIRED NO_MODULE)
+find_package(CLI11 REQUIRED)
+find_package(nlohmann_json 3.10 REQUIRED)
+find_package(yaml-cpp REQUIRED)
+find_package(fmt REQUIRED)
+find_package(spdlog REQUIRED)
+find_package(OpenMP REQUIRED COMPONENTS CXX)
+find_package(ZLIB REQUIRED)
+# ITK only behind src/io/image_io.cpp: its headers are heavy and stay out of our public API. We do
+# not include ITK_USE_FILE: it would put ITK's bundled Eigen on every target's include path ahead
+# of Debian's Eigen 3.4. The image IO factories are registered explicitly in image_io.cpp.
+find_package(ITK 5.2 REQUIRED COMPONENTS
+  ITKCommon ITKIOImageBase ITKIONIFTI ITKIONRRD ITKIOMeta ITKIOGDCM)
+find_package(pugixml REQUIRED)

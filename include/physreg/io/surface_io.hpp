@@ -1,0 +1,14 @@
+#pragma once
+// Triangulated surfaces: STL (binary written; ascii or binary read), PLY (binary little-endian
+// written with per-face labels "inside_label"/"outside_label"; ascii or binary read) and
+// Wavefront OBJ (labels as groups "g label_<inside>_<outside>"). Format by extension.
+#include "physreg/mesh/surface_mesh.hpp"
+
+#include <filesystem>
+
+namespace physreg {
+
+SurfaceMesh read_surface(const std::filesystem::path& path);
+void write_surface(const std::filesystem::path& path, const SurfaceMesh& surface);
+
+} // namespace physreg

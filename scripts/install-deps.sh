@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages physreg needs, if any is missing. Idempotent and quiet.
+# As root it installs them; otherwise it prints the exact apt-get line and stops.
+set -euo pipefail
+packages=(
+  cmake make g++ pkg-config
+  libinsighttoolkit5-dev   # ITK 5.2: medical image IO (NIfTI, NRRD, MetaImage, DICOM)
+  libeigen3-dev            # Eigen 3.4: linear algebra
+  libcli11-dev             # command line
+  nlohmann-json3-dev       # JSON summaries, Slicer markups
+  libyaml-cpp-dev          # tissue tables
+  libspdlog-dev libfmt-dev # logging, formatting
+  libpugixml-dev           # VTU (XML) reading
+  zlib1g-dev               # compressed VTU arrays
+  libgtest-dev libgmock-dev libbenchmark-dev
+)
+missing=()
+for p in "${packages[@]}"; do
+  [[ "$p" == \#* ]] && continue
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+[ ${#missing[@]} -eq 0 ] && exit 0
+line="apt-get install -y --no-install-recommends ${missing[*]}"
+if [ "$(id -u)" -ne 0 ]; then
+  echo "physreg needs these Debian packages. Please run, as root:" >&2
+  echo "  apt-get update && $line" >&2
+  exit 1
+fi
+echo "Installing Debian packages: ${missing[*]}" >&2
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -qq >/dev/null
+apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null

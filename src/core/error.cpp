@@ -1,0 +1,1 @@
+#include "physreg/core/error.hpp"

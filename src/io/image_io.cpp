@@ -1,0 +1,148 @@
+#include "physreg/io/image_io.hpp"
+
+#include "detail/itk_bridge.hpp"
+#include "physreg/core/atomic_file.hpp"
+#include "physreg/core/error.hpp"
+
+#include <cmath>
+
+namespace physreg {
+namespace fs = std::filesystem;
+namespace {
+
+ImageGeometry from_plain(const detail::PlainGeometry& p)
+{
+    ImageGeometry g;
+    for (int a = 0; a < 3; ++a) {
+        g.size[a] = p.size[a];
+        g.origin[a] = p.origin[a];
+        g.spacing[a] = p.spacing[a];
+        for (int b = 0; b < 3; ++b) g.direction(a, b) = p.direction[3 * a + b];
+    }
+    return g;
+}
+
+detail::PlainGeometry to_plain(const ImageGeometry& g)
+{
+    detail::PlainGeometry p;
+    for (int a = 0; a < 3; ++a) {
+        p.size[a] = g.size[a];
+        p.origin[a] = g.origin[a];
+        p.spacing[a] = g.spacing[a];
+        for (int b = 0; b < 3; ++b) p.direction[3 * a + b] = g.direction(a, b);
+    }
+    return p;
+}
+
+void check_size(const ImageGeometry& g, std::size_t values, std::size_t per_voxel, const fs::path& path)
+{
+    g.validate("image for '" + path.string() + "'");
+    if (values != per_voxel * static_cast<std::size_t>(g.voxel_count()))
+        fail("image for '{}': {} values for {} voxels", path.string(), values, g.voxel_count());
+}
+
+} // namespace
+
+ImageFileInfo read_image_info(const fs::path& path)
+{
+    const auto h = detail::itk_read_header(path.string());
+    ImageFileInfo info;
+    info.geometry = from_plain(h.geometry);
+    info.dimensions = h.dimensions;
+    info.components = h.components;
+    info.component_type = h.component_type;
+    info.format = h.format;
+    return info;
+}
+
+LabelVolume read_label_volume(const fs::path& path)
+{
+    const ImageFileInfo info = read_image_info(path);
+    const std::string what = "label volume '" + path.string() + "'";
+    if (info.components != 1)
+        fail("{}: has {} components per voxel; a label map has one", what, info.components);
+    // Read integer types that fit int32 as int32; everything else as double, then check.
+    const bool narrow = info.component_type == "char" || info.component_type == "unsigned_char" ||
+                        info.component_type == "short" || info.component_type == "unsigned_short" ||
+                        info.component_type == "int";
+    LabelVolume volume;
+    detail::PlainGeometry plain;
+    auto convert = [&](const auto& values) {
+        volume.geometry = from_plain(plain);
+        volume.geometry.validate(what);
+        volume.labels.resize(values.size());
+        for (std::size_t v = 0; v < values.size(); ++v) {
+            const double value = static_cast<double>(values[v]);
+            if (!(value >= 0.0 && value <= 65535.0) || value != std::floor(value))
+                fail("{}: voxel {} holds {} (labels must be integers in 0..65535)", what, v, value);
+            volume.labels[v] = static_cast<std::uint16_t>(value);
+        }
+    };
+    if (narrow) {
+        std::vector<std::int32_t> values;
+        detail::itk_read(path.string(), plain, values);
+        convert(values);
+    } else {
+        std::vector<double> values;
+        detail::itk_read(path.string(), plain, values);
+        convert(values);
+    }
+    return volume;
+}
+
+ScalarImage read_scalar_image(const fs::path& path)
+{
+    const ImageFileInfo info = read_image_info(path);
+    if (info.components != 1)
+        fail("image '{}': has {} components per voxel; expected a scalar image", path.string(), info.components);
+    ScalarImage out;
+    detail::PlainGeometry plain;
+    detail::itk_read(path.string(), plain, out.values);
+    out.geometry = from_plain(plain);
+    out.geometry.validate("image '" + path.string() + "'");
+    return out;
+}
+
+DisplacementField read_displacement_field(const fs::path& path)
+{
+    const ImageFileInfo info = read_image_info(path);
+    const std::string what = "displacement field '" + path.string() + "'";
+    if (info.components != 3) fail("{}: has {} components per voxel; expected 3", what, info.components);
+    DisplacementField out;
+    detail::PlainGeometry plain;
+    detail::itk_read_vectors(path.string(), plain, out.components);
+    out.geometry = from_plain(plain);
+    out.geometry.validate(what);
+    for (std::size_t i = 0; i < out.components.size(); ++i)
+        if (!std::isfinite(out.components[i])) fail("{}: voxel {} is not finite", what, i / 3);
+    return out;
+}
+
+void write_label_volume(const fs::path& path, const LabelVolume& volume)
+{
+    check_size(volume.geometry, volume.labels.size(), 1, path);
+    write_atomically(path, [&](const fs::path& tmp) {
+        detail::itk_write(tmp.string(), path.string(), to_plain(volume.geometry), volume.labels.data());
+    });
+}
+
+void write_scalar_image(const fs::path& path, const ScalarImage& image)
+{
+    check_size(image.geometry, image.values.size(), 1, path);
+    write_atomically(path, [&](const fs::path& tmp) {
+        detail::itk_write(tmp.string(), path.string(), to_plain(image.geometry), image.values.data());
+    });
+}
+
+void write_displacement_field(const fs::path& path, const DisplacementField& field)
+{
+    check_size(field.geometry, field.components.size(), 3, path);
+    for (std::size_t i = 0; i < field.components.size(); ++i)
+        if (!std::isfinite(field.components[i]))
+            fail("displacement field for '{}': voxel {} is not finite", path.string(), i / 3);
+    write_atomically(path, [&](const fs::path& tmp) {
+        detail::itk_write_vectors(tmp.string(), path.string(), to_plain(field.geometry), field.components.data());
+    });
+}
+
+} // namespace physreg

@@ -1,0 +1,229 @@
+#include "detail/itk_bridge.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+
+#include <itkGDCMImageIO.h>
+#include <itkGDCMImageIOFactory.h>
+#include <itkGDCMSeriesFileNames.h>
+#include <itkImage.h>
+#include <itkImageFileReader.h>
+#include <itkImageFileWriter.h>
+#include <itkImageIOFactory.h>
+#include <itkImageSeriesReader.h>
+#include <itkMetaImageIOFactory.h>
+#include <itkNiftiImageIOFactory.h>
+#include <itkNrrdImageIOFactory.h>
+#include <itkVector.h>
+
+#include <filesystem>
+
+namespace physreg::detail {
+namespace fs = std::filesystem;
+namespace {
+
+// The formats physreg promises, registered once (ITK_USE_FILE would do this globally).
+void register_image_formats()
+{
+    static const bool registered = [] {
+        itk::NiftiImageIOFactory::RegisterOneFactory();
+        itk::NrrdImageIOFactory::RegisterOneFactory();
+        itk::MetaImageIOFactory::RegisterOneFactory();
+        itk::GDCMImageIOFactory::RegisterOneFactory();
+        return true;
+    }();
+    (void)registered;
+}
+
+void require_exists(const std::string& path)
+{
+    register_image_formats();
+    std::error_code ec;
+    if (!fs::exists(path, ec)) fail("image '{}': file does not exist", path);
+}
+
+template <typename ImageType>
+PlainGeometry geometry_of(const ImageType* image)
+{
+    PlainGeometry g;
+    const auto region = image->GetLargestPossibleRegion();
+    for (unsigned a = 0; a < 3; ++a) {
+        g.size[a] = static_cast<std::int64_t>(region.GetSize()[a]);
+        g.origin[a] = image->GetOrigin()[a];
+        g.spacing[a] = image->GetSpacing()[a];
+        for (unsigned b = 0; b < 3; ++b) g.direction[3 * a + b] = image->GetDirection()[a][b];
+    }
+    return g;
+}
+
+template <typename ImageType>
+typename ImageType::Pointer make_image(const PlainGeometry& g)
+{
+    auto image = ImageType::New();
+    typename ImageType::RegionType region;
+    typename ImageType::PointType origin;
+    typename ImageType::SpacingType spacing;
+    typename ImageType::DirectionType direction;
+    for (unsigned a = 0; a < 3; ++a) {
+        region.SetSize(a, static_cast<itk::SizeValueType>(g.size[a]));
+        origin[a] = g.origin[a];
+        spacing[a] = g.spacing[a];
+        for (unsigned b = 0; b < 3; ++b) direction[a][b] = g.direction[3 * a + b];
+    }
+    image->SetRegions(region);
+    image->SetOrigin(origin);
+    image->SetSpacing(spacing);
+    image->SetDirection(direction);
+    image->Allocate();
+    return image;
+}
+
+std::vector<std::string> dicom_series_files(const std::string& dir)
+{
+    auto names = itk::GDCMSeriesFileNames::New();
+    names->SetUseSeriesDetails(true);
+    names->SetDirectory(dir);
+    const auto& series = names->GetSeriesUIDs();
+    if (series.empty()) fail("image '{}': directory holds no DICOM series", dir);
+    if (series.size() > 1)
+        logger()->warn("image '{}': {} DICOM series found; reading the first ({})", dir, series.size(), series.front());
+    return names->GetFileNames(series.front());
+}
+
+template <typename ImageType>
+typename ImageType::Pointer read_itk(const std::string& path)
+{
+    require_exists(path);
+    try {
+        if (fs::is_directory(path)) {
+            auto reader = itk::ImageSeriesReader<ImageType>::New();
+            reader->SetImageIO(itk::GDCMImageIO::New());
+            reader->SetFileNames(dicom_series_files(path));
+            reader->Update();
+            return reader->GetOutput();
+        }
+        auto reader = itk::ImageFileReader<ImageType>::New();
+        reader->SetFileName(path);
+        reader->Update();
+        return reader->GetOutput();
+    } catch (const itk::ExceptionObject& e) {
+        fail("image '{}': cannot be read (corrupt or truncated?): {}", path, e.GetDescription());
+    }
+}
+
+template <typename ImageType, typename T>
+void read_scalars(const std::string& path, PlainGeometry& geometry, std::vector<T>& values)
+{
+    auto image = read_itk<ImageType>(path);
+    geometry = geometry_of(image.GetPointer());
+    const auto* data = image->GetBufferPointer();
+    values.assign(data, data + geometry.size[0] * geometry.size[1] * geometry.size[2]);
+}
+
+template <typename ImageType>
+void write_itk(const std::string& path, const std::string& final_name, const ImageType* image)
+{
+    register_image_formats();
+    try {
+        auto writer = itk::ImageFileWriter<ImageType>::New();
+        writer->SetFileName(path);
+        writer->SetInput(image);
+        writer->SetUseCompression(true);
+        writer->Update();
+    } catch (const itk::ExceptionObject& e) {
+        fail("image '{}': cannot be written: {}", final_name, e.GetDescription());
+    }
+}
+
+} // namespace
+
+PlainHeader itk_read_header(const std::string& path)
+{
+    require_exists(path);
+    const bool directory = fs::is_directory(path);
+    const std::string probe = directory ? dicom_series_files(path).front() : path;
+    auto io = itk::ImageIOFactory::CreateImageIO(probe.c_str(), itk::ImageIOFactory::FileModeEnum::ReadMode);
+    if (!io) fail("image '{}': not a readable image (unknown format, corrupt or truncated header)", path);
+    try {
+        io->SetFileName(probe);
+        io->ReadImageInformation();
+    } catch (const itk::ExceptionObject& e) {
+        fail("image '{}': cannot read header: {}", path, e.GetDescription());
+    }
+    PlainHeader h;
+    unsigned dims = io->GetNumberOfDimensions();
+    // A trailing axis of length 1 (e.g. a 4-D NIfTI with one time point) is still a 3-D image.
+    while (dims > 3 && io->GetDimensions(dims - 1) == 1) --dims;
+    if (!(dims == 3 || (directory && dims == 2)))
+        fail("image '{}': has {} dimensions; physreg needs a 3-D image", path, dims);
+    h.dimensions = 3;
+    h.components = static_cast<int>(io->GetNumberOfComponents());
+    h.component_type = itk::ImageIOBase::GetComponentTypeAsString(io->GetComponentType());
+    h.format = io->GetNameOfClass();
+    if (directory) {
+        // The series geometry (slice count, spacing along z) needs the whole series.
+        auto image = read_itk<itk::Image<float, 3>>(path);
+        h.geometry = geometry_of(image.GetPointer());
+        return h;
+    }
+    for (unsigned a = 0; a < 3; ++a) {
+        h.geometry.size[a] = static_cast<std::int64_t>(io->GetDimensions(a));
+        h.geometry.origin[a] = io->GetOrigin(a);
+        h.geometry.spacing[a] = io->GetSpacing(a);
+        const auto column = io->GetDirection(a);
+        for (unsigned b = 0; b < 3; ++b) h.geometry.direction[3 * b + a] = column[b];
+    }
+    return h;
+}
+
+void itk_read(const std::string& path, PlainGeometry& g, std::vector<std::int32_t>& v)
+{
+    read_scalars<itk::Image<std::int32_t, 3>>(path, g, v);
+}
+void itk_read(const std::string& path, PlainGeometry& g, std::vector<double>& v)
+{
+    read_scalars<itk::Image<double, 3>>(path, g, v);
+}
+void itk_read(const std::string& path, PlainGeometry& g, std::vector<float>& v)
+{
+    read_scalars<itk::Image<float, 3>>(path, g, v);
+}
+
+void itk_read_vectors(const std::string& path, PlainGeometry& g, std::vector<float>& v)
+{
+    using FieldImage = itk::Image<itk::Vector<float, 3>, 3>;
+    auto image = read_itk<FieldImage>(path);
+    g = geometry_of(image.GetPointer());
+    const auto n = static_cast<std::size_t>(g.size[0] * g.size[1] * g.size[2]);
+    v.resize(3 * n);
+    const auto* data = image->GetBufferPointer();
+    for (std::size_t i = 0; i < n; ++i)
+        for (int c = 0; c < 3; ++c) v[3 * i + c] = data[i][c];
+}
+
+void itk_write(const std::string& path, const std::string& final_name, const PlainGeometry& g, const std::uint16_t* values)
+{
+    auto image = make_image<itk::Image<std::uint16_t, 3>>(g);
+    std::copy(values, values + g.size[0] * g.size[1] * g.size[2], image->GetBufferPointer());
+    write_itk(path, final_name, image.GetPointer());
+}
+
+void itk_write(const std::string& path, const std::string& final_name, const PlainGeometry& g, const float* values)
+{
+    auto image = make_image<itk::Image<float, 3>>(g);
+    std::copy(values, values + g.size[0] * g.size[1] * g.size[2], image->GetBufferPointer());
+    write_itk(path, final_name, image.GetPointer());
+}
+
+void itk_write_vectors(const std::string& path, const std::string& final_name, const PlainGeometry& g, const float* values)
+{
+    using FieldImage = itk::Image<itk::Vector<float, 3>, 3>;
+    auto image = make_image<FieldImage>(g);
+    const auto n = static_cast<std::size_t>(g.size[0] * g.size[1] * g.size[2]);
+    auto* data = image->GetBufferPointer();
+    for (std::size_t i = 0; i < n; ++i)
+        for (int c = 0; c < 3; ++c) data[i][c] = values[3 * i + c];
+    write_itk(path, final_name, image.GetPointer());
+}
+
+} // namespace physreg::detail

@@ -1,0 +1,321 @@
+#include "physreg/io/surface_io.hpp"
+
+#include "physreg/core/atomic_file.hpp"
+#include "physreg/core/error.hpp"
+
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+namespace physreg {
+namespace fs = std::filesystem;
+namespace {
+
+// STL stores unindexed triangles: identical coordinates become one vertex again.
+struct Welder {
+    SurfaceMesh& mesh;
+    std::map<std::array<double, 3>, std::int32_t> index;
+    std::int32_t add(const Vec3& p)
+    {
+        auto [it, inserted] = index.try_emplace({p[0], p[1], p[2]}, static_cast<std::int32_t>(mesh.vertices.size()));
+        if (inserted) mesh.vertices.push_back(p);
+        return it->second;
+    }
+};
+
+SurfaceMesh read_stl(const fs::path& path, const std::string& what)
+{
+    std::ifstream in(path, std::ios::binary);
+    std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    SurfaceMesh mesh;
+    Welder welder{mesh, {}};
+    std::uint32_t count = 0;
+    if (content.size() >= 84) std::memcpy(&count, content.data() + 80, 4);
+    const bool binary = content.size() >= 84 && content.size() == 84 + 50ull * count;
+    if (binary) {
+        for (std::uint32_t t = 0; t < count; ++t) {
+            const char* p = content.data() + 84 + 50ull * t + 12;
+            std::array<std::int32_t, 3> tri{};
+            for (int v = 0; v < 3; ++v) {
+                float xyz[3];
+                std::memcpy(xyz, p + 12 * v, 12);
+                tri[v] = welder.add(Vec3(xyz[0], xyz[1], xyz[2]));
+            }
+            mesh.triangles.push_back(tri);
+        }
+    } else {
+        if (content.rfind("solid", 0) != 0)
+            fail("{}: neither ascii STL (no 'solid') nor binary STL (size {} bytes does not match {} triangles)", what,
+                 content.size(), count);
+        std::istringstream s(content);
+        std::string word;
+        std::vector<std::int32_t> loop;
+        while (s >> word) {
+            if (word == "vertex") {
+                Vec3 p;
+                if (!(s >> p[0] >> p[1] >> p[2])) fail("{}: corrupt vertex line", what);
+                loop.push_back(welder.add(p));
+            } else if (word == "endloop") {
+                if (loop.size() != 3) fail("{}: facet with {} vertices", what, loop.size());
+                mesh.triangles.push_back({loop[0], loop[1], loop[2]});
+                loop.clear();
+            }
+        }
+        if (content.find("endsolid") == std::string::npos) fail("{}: truncated ascii STL (no 'endsolid')", what);
+    }
+    return mesh;
+}
+
+void write_stl(std::ofstream& out, const SurfaceMesh& mesh)
+{
+    char header[80] = "physreg surface, coordinates in mm (LPS)";
+    out.write(header, 80);
+    const auto count = static_cast<std::uint32_t>(mesh.triangles.size());
+    out.write(reinterpret_cast<const char*>(&count), 4);
+    for (const auto& t : mesh.triangles) {
+        const Vec3 n = (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]).normalized();
+        float buffer[12] = {float(n[0]), float(n[1]), float(n[2])};
+        for (int v = 0; v < 3; ++v)
+            for (int a = 0; a < 3; ++a) buffer[3 + 3 * v + a] = static_cast<float>(mesh.vertices[t[v]][a]);
+        out.write(reinterpret_cast<const char*>(buffer), 48);
+        const std::uint16_t attribute = 0;
+        out.write(reinterpret_cast<const char*>(&attribute), 2);
+    }
+}
+
+struct PlyProperty {
+    std::string name, type, list_count_type;
+    bool list = false;
+};
+struct PlyElement {
+    std::string name;
+    std::size_t count = 0;
+    std::vector<PlyProperty> properties;
+};
+
+int ply_size(const std::string& type)
+{
+    if (type == "char" || type == "uchar" || type == "int8" || type == "uint8") return 1;
+    if (type == "short" || type == "ushort" || type == "int16" || type == "uint16") return 2;
+    if (type == "int" || type == "uint" || type == "float" || type == "int32" || type == "uint32" || type == "float32") return 4;
+    if (type == "double" || type == "float64") return 8;
+    return 0;
+}
+
+double ply_value(std::istream& in, const std::string& type, bool binary, const std::string& what)
+{
+    if (!binary) {
+        double v;
+        if (!(in >> v)) fail("{}: truncated or corrupt ascii PLY data", what);
+        return v;
+    }
+    char b[8];
+    const int size = ply_size(type);
+    if (!in.read(b, size)) fail("{}: truncated binary PLY data", what);
+    auto get = [&b]<typename T>(T) {
+        T v;
+        std::memcpy(&v, b, sizeof(T));
+        return static_cast<double>(v);
+    };
+    if (type == "char" || type == "int8") return get(std::int8_t{});
+    if (type == "uchar" || type == "uint8") return get(std::uint8_t{});
+    if (type == "short" || type == "int16") return get(std::int16_t{});
+    if (type == "ushort" || type == "uint16") return get(std::uint16_t{});
+    if (type == "int" || type == "int32") return get(std::int32_t{});
+    if (type == "uint" || type == "uint32") return get(std::uint32_t{});
+    if (type == "float" || type == "float32") return get(float{});
+    return get(double{});
+}
+
+SurfaceMesh read_ply(const fs::path& path, const std::string& what)
+{
+    std::ifstream in(path, std::ios::binary);
+    std::string line;
+    std::getline(in, line);
+    if (line.rfind("ply", 0) != 0) fail("{}: not a PLY file", what);
+    bool binary = false;
+    std::vector<PlyElement> elements;
+    while (std::getline(in, line)) {
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        std::istringstream s(line);
+        std::string key;
+        s >> key;
+        if (key == "format") {
+            std::string format;
+            s >> format;
+            if (format == "binary_little_endian") binary = true;
+            else if (format != "ascii") fail("{}: PLY format '{}' is not supported", what, format);
+        } else if (key == "element") {
+            PlyElement e;
+            s >> e.name >> e.count;
+            elements.push_back(e);
+        } else if (key == "property") {
+            if (elements.empty()) fail("{}: property before element", what);
+            PlyProperty p;
+            std::string type;
+            s >> type;
+            if (type == "list") {
+                p.list = true;
+                s >> p.list_count_type >> p.type >> p.name;
+            } else {
+                p.type = type;
+                s >> p.name;
+            }
+            if (!ply_size(p.type)) fail("{}: unknown PLY type '{}'", what, p.type);
+            elements.back().properties.push_back(p);
+        } else if (key == "end_header") {
+            break;
+        }
+    }
+    if (!in) fail("{}: truncated PLY header", what);
+    SurfaceMesh mesh;
+    for (const auto& e : elements) {
+        for (std::size_t i = 0; i < e.count; ++i) {
+            Vec3 p = Vec3::Zero();
+            std::array<std::int32_t, 2> label{0, 0};
+            bool has_label = false;
+            std::vector<std::int32_t> polygon;
+            for (const auto& prop : e.properties) {
+                if (prop.list) {
+                    const auto n = static_cast<std::size_t>(ply_value(in, prop.list_count_type, binary, what));
+                    for (std::size_t k = 0; k < n; ++k) polygon.push_back(static_cast<std::int32_t>(ply_value(in, prop.type, binary, what)));
+                    continue;
+                }
+                const double v = ply_value(in, prop.type, binary, what);
+                if (e.name == "vertex") {
+                    if (prop.name == "x") p[0] = v;
+                    if (prop.name == "y") p[1] = v;
+                    if (prop.name == "z") p[2] = v;
+                } else if (prop.name == "inside_label") {
+                    label[0] = static_cast<std::int32_t>(v);
+                    has_label = true;
+                } else if (prop.name == "outside_label") {
+                    label[1] = static_cast<std::int32_t>(v);
+                    has_label = true;
+                }
+            }
+            if (e.name == "vertex") mesh.vertices.push_back(p);
+            if (e.name == "face") {
+                if (polygon.size() < 3) fail("{}: face {} has {} vertices", what, i, polygon.size());
+                for (std::size_t k = 1; k + 1 < polygon.size(); ++k) {
+                    mesh.triangles.push_back({polygon[0], polygon[k], polygon[k + 1]});
+                    if (has_label) mesh.labels.push_back(label);
+                }
+            }
+        }
+    }
+    return mesh;
+}
+
+void write_ply(std::ofstream& out, const SurfaceMesh& mesh)
+{
+    const bool labelled = !mesh.labels.empty();
+    out << "ply\nformat binary_little_endian 1.0\ncomment physreg surface, coordinates in mm (LPS)\n"
+        << "element vertex " << mesh.vertices.size() << "\nproperty double x\nproperty double y\nproperty double z\n"
+        << "element face " << mesh.triangles.size() << "\nproperty list uchar int vertex_indices\n";
+    if (labelled) out << "property int inside_label\nproperty int outside_label\n";
+    out << "end_header\n";
+    for (const auto& p : mesh.vertices) out.write(reinterpret_cast<const char*>(p.data()), 24);
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+        const std::uint8_t three = 3;
+        out.write(reinterpret_cast<const char*>(&three), 1);
+        out.write(reinterpret_cast<const char*>(mesh.triangles[t].data()), 12);
+        if (labelled) out.write(reinterpret_cast<const char*>(mesh.labels[t].data()), 8);
+    }
+}
+
+SurfaceMesh read_obj(const fs::path& path, const std::string& what)
+{
+    std::ifstream in(path);
+    SurfaceMesh mesh;
+    std::array<std::int32_t, 2> label{0, 0};
+    bool labelled = false;
+    std::string line;
+    std::size_t line_number = 0;
+    while (std::getline(in, line)) {
+        ++line_number;
+        std::istringstream s(line);
+        std::string key;
+        s >> key;
+        if (key == "v") {
+            Vec3 p;
+            if (!(s >> p[0] >> p[1] >> p[2])) fail("{}: line {}: corrupt vertex", what, line_number);
+            mesh.vertices.push_back(p);
+        } else if (key == "g" || key == "o") {
+            std::string name;
+            s >> name;
+            int a = 0, b = 0;
+            if (std::sscanf(name.c_str(), "label_%d_%d", &a, &b) == 2) {
+                label = {a, b};
+                labelled = true;
+            }
+        } else if (key == "f") {
+            std::vector<std::int32_t> polygon;
+            std::string token;
+            while (s >> token) {
+                const long v = std::strtol(token.c_str(), nullptr, 10); // "v/vt/vn": the vertex index
+                if (v == 0) fail("{}: line {}: bad face index '{}'", what, line_number, token);
+                polygon.push_back(static_cast<std::int32_t>(v > 0 ? v - 1 : static_cast<long>(mesh.vertices.size()) + v));
+            }
+            if (polygon.size() < 3) fail("{}: line {}: face with {} vertices", what, line_number, polygon.size());
+            for (std::size_t k = 1; k + 1 < polygon.size(); ++k) {
+                mesh.triangles.push_back({polygon[0], polygon[k], polygon[k + 1]});
+                mesh.labels.push_back(label);
+            }
+        }
+    }
+    if (!labelled) mesh.labels.clear();
+    return mesh;
+}
+
+void write_obj(std::ofstream& out, const SurfaceMesh& mesh)
+{
+    out.precision(17);
+    out << "# physreg surface, coordinates in mm (LPS)\n";
+    for (const auto& p : mesh.vertices) out << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << "\n";
+    std::array<std::int32_t, 2> current{-1, -1};
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+        if (!mesh.labels.empty() && mesh.labels[t] != current) {
+            current = mesh.labels[t];
+            out << "g label_" << current[0] << '_' << current[1] << "\n";
+        }
+        const auto& tri = mesh.triangles[t];
+        out << "f " << tri[0] + 1 << ' ' << tri[1] + 1 << ' ' << tri[2] + 1 << "\n";
+    }
+}
+
+} // namespace
+
+SurfaceMesh read_surface(const fs::path& path)
+{
+    const std::string what = "surface '" + path.string() + "'";
+    if (!fs::exists(path)) fail("{}: file does not exist", what);
+    const std::string ext = full_extension(path);
+    SurfaceMesh mesh;
+    if (ext == ".stl") mesh = read_stl(path, what);
+    else if (ext == ".ply") mesh = read_ply(path, what);
+    else if (ext == ".obj") mesh = read_obj(path, what);
+    else fail("{}: unknown surface extension '{}' (use .stl, .ply or .obj)", what, ext);
+    mesh.validate(what);
+    if (mesh.triangles.empty()) fail("{}: holds no triangles", what);
+    return mesh;
+}
+
+void write_surface(const fs::path& path, const SurfaceMesh& mesh)
+{
+    mesh.validate("surface for '" + path.string() + "'");
+    const std::string ext = full_extension(path);
+    if (ext != ".stl" && ext != ".ply" && ext != ".obj")
+        fail("surface '{}': unknown extension '{}' (use .stl, .ply or .obj)", path.string(), ext);
+    write_atomically(path, [&](const fs::path& tmp) {
+        std::ofstream out(tmp, std::ios::binary);
+        if (ext == ".stl") write_stl(out, mesh);
+        else if (ext == ".ply") write_ply(out, mesh);
+        else write_obj(out, mesh);
+        out.close();
+        if (!out) fail("surface '{}': write failed", path.string());
+    });
+}
+
+} // namespace physreg
