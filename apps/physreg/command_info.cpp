@@ -65,9 +65,7 @@ nlohmann::json mesh_info(const std::string& path)
     const VolumeMesh mesh = read_volume_mesh(path, &data);
     nlohmann::json out = mesh_summary(mesh);
     out["kind"] = "volume_mesh";
-    std::int32_t pieces = 0;
-    face_connected_pieces(mesh, pieces);
-    out["face_connected_pieces"] = pieces;
+    out["face_connected_pieces"] = face_connected_pieces(mesh).pieces.size();
     nlohmann::json arrays = nlohmann::json::array();
     for (const auto& a : data.point_data) arrays.push_back({{"name", a.name}, {"association", "point"}, {"components", a.components}});
     for (const auto& a : data.cell_data) arrays.push_back({{"name", a.name}, {"association", "cell"}, {"components", a.components}});

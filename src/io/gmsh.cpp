@@ -37,11 +37,12 @@ struct Tokens {
         if (!in) fail("{}: truncated or corrupt file while reading {}", what, item);
         return v;
     }
-    std::string word()
+    // Counts in version 1/2 files are ascii even in binary files.
+    std::int64_t ascii_count(const char* item)
     {
-        std::string w;
-        in >> w;
-        return w;
+        std::int64_t n = -1;
+        if (!(in >> n) || n < 0) fail("{}: corrupt {}", what, item);
+        return n;
     }
     void expect_end(const std::string& section)
     {
@@ -122,8 +123,7 @@ VolumeMesh assemble(const std::string& what, const std::unordered_map<std::int64
 
 void read_nodes_v1v2(Tokens& t, std::unordered_map<std::int64_t, Vec3>& nodes, std::vector<std::int64_t>& order)
 {
-    const auto n = t.get<std::int64_t>("node count");
-    if (n < 0) fail("{}: negative node count", t.what);
+    const auto n = t.ascii_count("node count");
     if (t.binary) t.skip_line();
     for (std::int64_t i = 0; i < n; ++i) {
         const auto tag = static_cast<std::int64_t>(t.binary ? t.get<std::int32_t>("node tag") : t.get<std::int64_t>("node tag"));
@@ -136,8 +136,7 @@ void read_nodes_v1v2(Tokens& t, std::unordered_map<std::int64_t, Vec3>& nodes, s
 
 void read_elements_v1v2(Tokens& t, int major, std::vector<RawCell>& cells)
 {
-    const auto m = t.get<std::int64_t>("element count");
-    if (m < 0) fail("{}: negative element count", t.what);
+    const auto m = t.ascii_count("element count");
     if (t.binary) {
         t.skip_line();
         std::int64_t done = 0;

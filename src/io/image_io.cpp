@@ -4,7 +4,10 @@
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <zlib.h>
 
 namespace physreg {
 namespace fs = std::filesystem;
@@ -41,6 +44,62 @@ void check_size(const ImageGeometry& g, std::size_t values, std::size_t per_voxe
         fail("image for '{}': {} values for {} voxels", path.string(), values, g.voxel_count());
 }
 
+// ITK's NIfTI reader accepts a truncated .nii/.nii.gz and fills the missing voxels with zeros.
+// We check that the file holds as many bytes as its header promises.
+void verify_nifti_complete(const fs::path& path)
+{
+    const std::string ext = full_extension(path);
+    if (ext != ".nii" && ext != ".nii.gz") return;
+    const std::string what = "image '" + path.string() + "'";
+    gzFile file = gzopen(path.string().c_str(), "rb"); // reads uncompressed files too
+    if (!file) fail("{}: cannot open file", what);
+    unsigned char header[540];
+    const int got = gzread(file, header, sizeof(header));
+    auto get = [&](int offset, int size, bool swap) {
+        unsigned char b[8];
+        std::memcpy(b, header + offset, size);
+        if (swap) std::reverse(b, b + size);
+        std::int64_t v = 0;
+        if (size == 2) { std::int16_t x; std::memcpy(&x, b, 2); v = x; }
+        if (size == 4) { std::int32_t x; std::memcpy(&x, b, 4); v = x; }
+        if (size == 8) { std::int64_t x; std::memcpy(&x, b, 8); v = x; }
+        return v;
+    };
+    std::int64_t expected = -1;
+    if (got >= 348) {
+        for (bool swap : {false, true}) {
+            const auto sizeof_hdr = get(0, 4, swap);
+            if (sizeof_hdr == 348) {
+                std::int64_t voxels = 1;
+                const auto dims = get(40, 2, swap);
+                for (int d = 1; d <= std::min<std::int64_t>(dims, 7); ++d) voxels *= std::max<std::int64_t>(1, get(40 + 2 * d, 2, swap));
+                float offset;
+                std::int32_t raw = static_cast<std::int32_t>(get(108, 4, swap));
+                std::memcpy(&offset, &raw, 4);
+                expected = static_cast<std::int64_t>(offset) + voxels * (get(72, 2, swap) / 8);
+            } else if (sizeof_hdr == 540 && got >= 540) {
+                std::int64_t voxels = 1;
+                const auto dims = get(16, 8, swap);
+                for (int d = 1; d <= std::min<std::int64_t>(dims, 7); ++d) voxels *= std::max<std::int64_t>(1, get(16 + 8 * d, 8, swap));
+                expected = get(168, 8, swap) + voxels * (get(12, 2, swap) / 8);
+            }
+            if (expected >= 0) break;
+        }
+    }
+    std::int64_t total = got > 0 ? got : 0;
+    std::vector<char> buffer(1 << 20);
+    int n;
+    while ((n = gzread(file, buffer.data(), static_cast<unsigned>(buffer.size()))) > 0) total += n;
+    int error = Z_OK;
+    const char* message = gzerror(file, &error);
+    const std::string zlib_message = message ? message : "";
+    gzclose(file);
+    if (n < 0 || (error != Z_OK && error != Z_STREAM_END))
+        fail("{}: corrupt or truncated compressed data ({})", what, zlib_message);
+    if (expected >= 0 && total < expected)
+        fail("{}: truncated: holds {} bytes, its header promises {}", what, total, expected);
+}
+
 } // namespace
 
 ImageFileInfo read_image_info(const fs::path& path)
@@ -58,6 +117,7 @@ ImageFileInfo read_image_info(const fs::path& path)
 LabelVolume read_label_volume(const fs::path& path)
 {
     const ImageFileInfo info = read_image_info(path);
+    verify_nifti_complete(path);
     const std::string what = "label volume '" + path.string() + "'";
     if (info.components != 1)
         fail("{}: has {} components per voxel; a label map has one", what, info.components);
@@ -93,6 +153,7 @@ LabelVolume read_label_volume(const fs::path& path)
 ScalarImage read_scalar_image(const fs::path& path)
 {
     const ImageFileInfo info = read_image_info(path);
+    verify_nifti_complete(path);
     if (info.components != 1)
         fail("image '{}': has {} components per voxel; expected a scalar image", path.string(), info.components);
     ScalarImage out;
@@ -106,6 +167,7 @@ ScalarImage read_scalar_image(const fs::path& path)
 DisplacementField read_displacement_field(const fs::path& path)
 {
     const ImageFileInfo info = read_image_info(path);
+    verify_nifti_complete(path);
     const std::string what = "displacement field '" + path.string() + "'";
     if (info.components != 3) fail("{}: has {} components per voxel; expected 3", what, info.components);
     DisplacementField out;

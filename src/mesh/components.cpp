@@ -63,7 +63,7 @@ ComponentPolicy parse_component_policy(const std::string& text)
     fail("--components: '{}' is not one of all, largest, refuse", text);
 }
 
-std::vector<std::int32_t> face_connected_pieces(const VolumeMesh& mesh, std::int32_t& piece_count)
+FaceConnectedPieces face_connected_pieces(const VolumeMesh& mesh)
 {
     UnionFind uf(mesh.cell_count());
     const bool grid = mesh.grid && mesh.cell_type == CellType::hexahedron &&
@@ -74,20 +74,30 @@ std::vector<std::int32_t> face_connected_pieces(const VolumeMesh& mesh, std::int
         for (const auto& face : match_faces(mesh))
             if (face.neighbour >= 0) uf.unite(face.cell, face.neighbour);
     }
-    std::map<std::int32_t, std::pair<double, std::int32_t>> volume_of_root; // root -> (volume, root)
+    // Per root: cells and volume (grid cells are all the same box).
     std::vector<std::int32_t> root(mesh.cell_count());
+    std::vector<ComponentReport::Piece> by_root(mesh.cell_count());
+    const double grid_cell_volume = grid ? mesh.grid->cell_volume_mm3() : 0.0;
     for (std::size_t c = 0; c < mesh.cell_count(); ++c) {
         root[c] = uf.find(static_cast<std::int32_t>(c));
-        volume_of_root[root[c]].first += cell_volume(mesh, c);
+        ++by_root[root[c]].cells;
+        by_root[root[c]].volume_mm3 += grid ? grid_cell_volume : cell_volume(mesh, c);
     }
-    std::vector<std::pair<double, std::int32_t>> order;
-    for (const auto& [r, v] : volume_of_root) order.push_back({-v.first, r});
-    std::sort(order.begin(), order.end());
-    std::map<std::int32_t, std::int32_t> rank;
-    for (std::size_t p = 0; p < order.size(); ++p) rank[order[p].second] = static_cast<std::int32_t>(p);
-    for (auto& r : root) r = rank[r];
-    piece_count = static_cast<std::int32_t>(order.size());
-    return root;
+    std::vector<std::int32_t> order;
+    for (std::size_t r = 0; r < by_root.size(); ++r)
+        if (by_root[r].cells) order.push_back(static_cast<std::int32_t>(r));
+    std::stable_sort(order.begin(), order.end(), [&](std::int32_t a, std::int32_t b) {
+        return by_root[a].volume_mm3 > by_root[b].volume_mm3;
+    });
+    std::vector<std::int32_t> rank(mesh.cell_count(), -1);
+    FaceConnectedPieces out;
+    for (std::size_t p = 0; p < order.size(); ++p) {
+        rank[order[p]] = static_cast<std::int32_t>(p);
+        out.pieces.push_back(by_root[order[p]]);
+    }
+    out.piece_of_cell.resize(mesh.cell_count());
+    for (std::size_t c = 0; c < mesh.cell_count(); ++c) out.piece_of_cell[c] = rank[root[c]];
+    return out;
 }
 
 void keep_cells(VolumeMesh& mesh, const std::vector<bool>& keep)
@@ -115,13 +125,10 @@ ComponentReport repair_components(VolumeMesh& mesh, ComponentPolicy policy, bool
                                   const std::string& what)
 {
     ComponentReport report;
-    std::int32_t count = 0;
-    const auto piece = face_connected_pieces(mesh, count);
-    report.pieces.resize(static_cast<std::size_t>(count));
-    for (std::size_t c = 0; c < mesh.cell_count(); ++c) {
-        ++report.pieces[piece[c]].cells;
-        report.pieces[piece[c]].volume_mm3 += cell_volume(mesh, c);
-    }
+    const auto found = face_connected_pieces(mesh);
+    const auto& piece = found.piece_of_cell;
+    report.pieces = found.pieces;
+    const auto count = static_cast<std::int32_t>(report.pieces.size());
     // A node used by cells of two pieces joins them only along an edge or at a vertex.
     std::vector<std::int32_t> owner(mesh.node_count(), -1);
     std::map<std::pair<std::int32_t, std::int32_t>, std::int32_t> copies;

@@ -24,8 +24,11 @@ struct ComponentReport {
     double dropped_volume_mm3 = 0.0;
 };
 
-/// Labels each cell with its face-connected piece (0 = largest volume). `piece_count` out.
-std::vector<std::int32_t> face_connected_pieces(const VolumeMesh& mesh, std::int32_t& piece_count);
+struct FaceConnectedPieces {
+    std::vector<std::int32_t> piece_of_cell;    ///< 0 = the piece with most volume
+    std::vector<ComponentReport::Piece> pieces; ///< largest volume first
+};
+FaceConnectedPieces face_connected_pieces(const VolumeMesh& mesh);
 
 /// Finds the pieces, splits nodes shared by different pieces (if split_nonmanifold; otherwise such
 /// nodes are an Error), then applies the policy. Nodes no longer used are removed.

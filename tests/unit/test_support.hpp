@@ -1,0 +1,41 @@
+#pragma once
+// Helpers shared by the unit tests: temporary directories, synthetic label volumes, shared data.
+#include "physreg/image/image_geometry.hpp"
+
+#include <filesystem>
+#include <functional>
+#include <gtest/gtest.h>
+#include <string>
+
+namespace physreg::test {
+
+/// A fresh directory removed at the end of the test.
+class TempDir {
+public:
+    TempDir();
+    ~TempDir();
+    const std::filesystem::path& path() const { return m_path; }
+    std::filesystem::path operator/(const std::string& name) const { return m_path / name; }
+    /// Names of the files in the directory (to check that nothing partial was left behind).
+    std::vector<std::string> files() const;
+
+private:
+    std::filesystem::path m_path;
+};
+
+/// A label volume of `size` voxels whose label at (i,j,k) is label(i,j,k).
+LabelVolume make_volume(Index3 size, const std::function<std::uint16_t(int, int, int)>& label,
+                        Vec3 spacing = Vec3::Ones(), Vec3 origin = Vec3::Zero(), Mat3 direction = Mat3::Identity());
+
+/// A proper rotation (det +1) about an oblique axis.
+Mat3 oblique_rotation();
+
+/// ../shared/data next to the checkout, or empty when it is absent.
+std::filesystem::path shared_data_dir();
+
+} // namespace physreg::test
+
+#define PHYSREG_REQUIRE_SHARED_DATA(sub)                                                             \
+    const auto shared_data = ::physreg::test::shared_data_dir() / (sub);                            \
+    if (::physreg::test::shared_data_dir().empty() || !std::filesystem::exists(shared_data))        \
+    GTEST_SKIP() << "shared data '" << (sub) << "' is absent"
