@@ -1,0 +1,102 @@
+#pragma once
+// Hyperelastic material laws of the TLED solver, evaluated at one deformation gradient F.
+//
+// Units inside the solver: mm, N, MPa (= N/mm²), tonne/mm³, s. Tissue tables give E in Pa and
+// density in kg/m³; material_from_tissue converts.
+//
+// Compressible Neo-Hookean (the decoupled form of TLED and NiftySim):
+//   Ψ = μ/2 (Ī₁ − 3) + κ/2 (J − 1)²,  Ī₁ = J^(-2/3) tr C,
+//   S = μ J^(-2/3) (I − (tr C / 3) C⁻¹) + κ J (J − 1) C⁻¹,
+// with μ = E / (2(1 + ν)) and κ = E / (3(1 − 2ν)).
+// St Venant–Kirchhoff: S = λ tr(E) I + 2 μ E, E = (C − I)/2.
+// Small-strain linear elastic: P = σ = λ tr(ε) I + 2 μ ε, ε = sym(F) − I.
+#include "physreg/model/tissue_table.hpp"
+
+#include <cmath>
+#include <string>
+
+namespace physreg {
+
+enum class MaterialLaw { neo_hookean, st_venant_kirchhoff, linear_elastic };
+MaterialLaw parse_material_law(const std::string& text); ///< "neo-hookean", "svk", "linear"
+std::string to_string(MaterialLaw law);
+
+struct ElasticMaterial {
+    double mu_mpa = 0.0;      ///< shear modulus
+    double lambda_mpa = 0.0;  ///< first Lamé parameter
+    double kappa_mpa = 0.0;   ///< bulk modulus
+    double density_t_mm3 = 0.0;
+
+    double dilatational_modulus_mpa() const { return lambda_mpa + 2.0 * mu_mpa; }
+    /// Dilatational wave speed, mm/s.
+    double wave_speed_mm_s() const { return std::sqrt(dilatational_modulus_mpa() / density_t_mm3); }
+};
+
+/// Throws Error naming the tissue for impossible parameters.
+ElasticMaterial material_from_tissue(const Tissue& tissue);
+
+/// First Piola–Kirchhoff stress P (MPa) for F (row-major 3×3), written to `p`. Returns J = det F.
+/// Templated on the scalar so single and double precision kernels share it.
+template <typename Real>
+inline Real first_piola_kirchhoff(MaterialLaw law, Real mu, Real lambda, Real kappa, const Real* f, Real* p)
+{
+    const Real j = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) +
+                   f[2] * (f[3] * f[7] - f[4] * f[6]);
+    if (law == MaterialLaw::linear_elastic) {
+        const Real trace = f[0] + f[4] + f[8] - Real(3);
+        for (int r = 0; r < 3; ++r)
+            for (int c = 0; c < 3; ++c) {
+                const Real eps = Real(0.5) * (f[3 * r + c] + f[3 * c + r]) - (r == c ? Real(1) : Real(0));
+                p[3 * r + c] = Real(2) * mu * eps + (r == c ? lambda * trace : Real(0));
+            }
+        return j;
+    }
+    // C = Fᵀ F (symmetric)
+    Real cm[6];
+    cm[0] = f[0] * f[0] + f[3] * f[3] + f[6] * f[6];
+    cm[1] = f[1] * f[1] + f[4] * f[4] + f[7] * f[7];
+    cm[2] = f[2] * f[2] + f[5] * f[5] + f[8] * f[8];
+    cm[3] = f[0] * f[1] + f[3] * f[4] + f[6] * f[7]; // C01
+    cm[4] = f[1] * f[2] + f[4] * f[5] + f[7] * f[8]; // C12
+    cm[5] = f[0] * f[2] + f[3] * f[5] + f[6] * f[8]; // C02
+    Real s[6];
+    if (law == MaterialLaw::st_venant_kirchhoff) {
+        const Real tr_e = Real(0.5) * (cm[0] + cm[1] + cm[2] - Real(3));
+        s[0] = lambda * tr_e + mu * (cm[0] - Real(1));
+        s[1] = lambda * tr_e + mu * (cm[1] - Real(1));
+        s[2] = lambda * tr_e + mu * (cm[2] - Real(1));
+        s[3] = mu * cm[3];
+        s[4] = mu * cm[4];
+        s[5] = mu * cm[5];
+    } else {
+        // C⁻¹ = adj(C) / J²
+        const Real inv_j2 = Real(1) / (j * j);
+        const Real ci0 = (cm[1] * cm[2] - cm[4] * cm[4]) * inv_j2;
+        const Real ci1 = (cm[0] * cm[2] - cm[5] * cm[5]) * inv_j2;
+        const Real ci2 = (cm[0] * cm[1] - cm[3] * cm[3]) * inv_j2;
+        const Real ci3 = (cm[5] * cm[4] - cm[3] * cm[2]) * inv_j2;
+        const Real ci4 = (cm[3] * cm[5] - cm[0] * cm[4]) * inv_j2;
+        const Real ci5 = (cm[3] * cm[4] - cm[1] * cm[5]) * inv_j2;
+        const Real cbrt_j = std::cbrt(j);
+        const Real mu_j = mu / (cbrt_j * cbrt_j); // μ J^(-2/3)
+        const Real third_trace = (cm[0] + cm[1] + cm[2]) / Real(3);
+        const Real vol = kappa * j * (j - Real(1));
+        const Real a = vol - mu_j * third_trace; // coefficient of C⁻¹
+        s[0] = mu_j + a * ci0;
+        s[1] = mu_j + a * ci1;
+        s[2] = mu_j + a * ci2;
+        s[3] = a * ci3;
+        s[4] = a * ci4;
+        s[5] = a * ci5;
+    }
+    // P = F S
+    for (int r = 0; r < 3; ++r) {
+        const Real f0 = f[3 * r], f1 = f[3 * r + 1], f2 = f[3 * r + 2];
+        p[3 * r + 0] = f0 * s[0] + f1 * s[3] + f2 * s[5];
+        p[3 * r + 1] = f0 * s[3] + f1 * s[1] + f2 * s[4];
+        p[3 * r + 2] = f0 * s[5] + f1 * s[4] + f2 * s[2];
+    }
+    return j;
+}
+
+} // namespace physreg

@@ -1,0 +1,467 @@
+#include "physreg/mechanics/tled_solver.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <climits>
+#include <cmath>
+
+namespace physreg {
+namespace {
+
+constexpr std::size_t BLOCK = 3 * 1024; // degrees of freedom per reduction block
+
+// Forces of one uniform-strain hexahedron with hourglass control, added into f. Returns det F.
+template <typename Real>
+inline Real hexahedron_forces(const std::int32_t* ids, const Real* u, const Real* b, const Real* gamma, Real volume,
+                              Real k_hourglass, MaterialLaw law, Real mu, Real lambda, Real kappa, Real* f)
+{
+    Real ux[8], uy[8], uz[8];
+    for (int a = 0; a < 8; ++a) {
+        const Real* ua = u + 3 * static_cast<std::size_t>(ids[a]);
+        ux[a] = ua[0];
+        uy[a] = ua[1];
+        uz[a] = ua[2];
+    }
+    Real F[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    for (int a = 0; a < 8; ++a) {
+        const Real b0 = b[3 * a], b1 = b[3 * a + 1], b2 = b[3 * a + 2];
+        F[0] += ux[a] * b0;
+        F[1] += ux[a] * b1;
+        F[2] += ux[a] * b2;
+        F[3] += uy[a] * b0;
+        F[4] += uy[a] * b1;
+        F[5] += uy[a] * b2;
+        F[6] += uz[a] * b0;
+        F[7] += uz[a] * b1;
+        F[8] += uz[a] * b2;
+    }
+    Real P[9];
+    const Real j = first_piola_kirchhoff(law, mu, lambda, kappa, F, P);
+    for (int r = 0; r < 9; ++r) P[r] *= volume;
+    // Hourglass modes of the displacement.
+    Real qx[4] = {0, 0, 0, 0}, qy[4] = {0, 0, 0, 0}, qz[4] = {0, 0, 0, 0};
+    for (int a = 0; a < 8; ++a)
+        for (int m = 0; m < 4; ++m) {
+            const Real g = gamma[4 * a + m];
+            qx[m] += g * ux[a];
+            qy[m] += g * uy[a];
+            qz[m] += g * uz[a];
+        }
+    for (int m = 0; m < 4; ++m) {
+        qx[m] *= k_hourglass;
+        qy[m] *= k_hourglass;
+        qz[m] *= k_hourglass;
+    }
+    for (int a = 0; a < 8; ++a) {
+        const Real b0 = b[3 * a], b1 = b[3 * a + 1], b2 = b[3 * a + 2];
+        Real fx = P[0] * b0 + P[1] * b1 + P[2] * b2;
+        Real fy = P[3] * b0 + P[4] * b1 + P[5] * b2;
+        Real fz = P[6] * b0 + P[7] * b1 + P[8] * b2;
+        for (int m = 0; m < 4; ++m) {
+            const Real g = gamma[4 * a + m];
+            fx += g * qx[m];
+            fy += g * qy[m];
+            fz += g * qz[m];
+        }
+        Real* fa = f + 3 * static_cast<std::size_t>(ids[a]);
+        fa[0] += fx;
+        fa[1] += fy;
+        fa[2] += fz;
+    }
+    return j;
+}
+
+template <typename Real>
+inline Real tetrahedron_forces(const std::int32_t* ids, const Real* u, const Real* b, Real volume, MaterialLaw law,
+                               Real mu, Real lambda, Real kappa, Real* f)
+{
+    Real F[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    for (int a = 0; a < 4; ++a) {
+        const Real* ua = u + 3 * static_cast<std::size_t>(ids[a]);
+        for (int r = 0; r < 3; ++r)
+            for (int c = 0; c < 3; ++c) F[3 * r + c] += ua[r] * b[3 * a + c];
+    }
+    Real P[9];
+    const Real j = first_piola_kirchhoff(law, mu, lambda, kappa, F, P);
+    for (int a = 0; a < 4; ++a) {
+        Real* fa = f + 3 * static_cast<std::size_t>(ids[a]);
+        for (int r = 0; r < 3; ++r)
+            fa[r] += volume * (P[3 * r] * b[3 * a] + P[3 * r + 1] * b[3 * a + 1] + P[3 * r + 2] * b[3 * a + 2]);
+    }
+    return j;
+}
+
+} // namespace
+
+void EquilibriumOptions::validate() const
+{
+    if (max_iterations < 1) fail("max_iterations = {} must be ≥ 1", max_iterations);
+    if (!(displacement_tolerance_mm > 0)) fail("displacement_tolerance_mm = {} must be > 0", displacement_tolerance_mm);
+    if (!(residual_tolerance > 0)) fail("residual_tolerance = {} must be > 0", residual_tolerance);
+    if (!(mass_safety >= 1.0)) fail("mass_safety = {} must be ≥ 1", mass_safety);
+}
+
+template <typename Real>
+TledSolver<Real>::TledSolver(const TledModel& model) : m_model(model), m_n(model.node_count())
+{
+    const int npe = model.nodes_per_element();
+    for (const auto& g : model.geometries()) {
+        for (int k = 0; k < 3 * npe; ++k) m_dn.push_back(static_cast<Real>(g.dn_dx[k]));
+        for (int k = 0; k < 32; ++k) m_gamma.push_back(static_cast<Real>(g.gamma[k]));
+        m_volume.push_back(static_cast<Real>(g.volume_mm3));
+        m_vb2.push_back(static_cast<Real>(g.volume_mm3 * g.b_squared));
+    }
+    for (const auto& m : model.materials()) {
+        m_mu.push_back(static_cast<Real>(m.mu_mpa));
+        m_lambda.push_back(static_cast<Real>(m.lambda_mpa));
+        m_kappa.push_back(static_cast<Real>(m.kappa_mpa));
+        m_hourglass.push_back(static_cast<Real>(model.options().hourglass_kappa * m.dilatational_modulus_mpa() / 8.0));
+    }
+    m_rest.assign(model.rest_positions().begin(), model.rest_positions().end());
+    const std::size_t dofs = 3 * m_n;
+    m_u.assign(dofs, 0);
+    m_u_prev.assign(dofs, 0);
+    m_u_next.assign(dofs, 0);
+    m_force.assign(dofs, 0);
+    m_force_prev.assign(dofs, 0);
+    m_external.assign(dofs, 0);
+    m_constrained.assign(dofs, 0);
+    m_prescribed.assign(dofs, 0);
+}
+
+template <typename Real>
+void TledSolver<Real>::set_loads(Loads loads)
+{
+    loads.validate(m_n);
+    m_loads = std::move(loads);
+    std::fill(m_constrained.begin(), m_constrained.end(), 0);
+    std::fill(m_prescribed.begin(), m_prescribed.end(), Real(0));
+    for (const auto& c : m_loads.constraints)
+        for (auto node : c.nodes)
+            for (int d = 0; d < 3; ++d)
+                if (c.dofs[d]) {
+                    m_constrained[3 * node + d] = 1;
+                    m_prescribed[3 * node + d] = static_cast<Real>(c.displacement_mm[d]);
+                }
+    std::fill(m_external.begin(), m_external.end(), Real(0));
+    for (std::size_t k = 0; k < m_loads.external_forces_n.size(); ++k) m_external[k] = static_cast<Real>(m_loads.external_forces_n[k]);
+}
+
+template <typename Real>
+void TledSolver<Real>::reset()
+{
+    std::fill(m_u.begin(), m_u.end(), Real(0));
+    std::fill(m_u_prev.begin(), m_u_prev.end(), Real(0));
+    m_time = 0.0;
+    m_steps = 0;
+}
+
+template <typename Real>
+void TledSolver<Real>::set_displacement(const std::vector<double>& u)
+{
+    if (u.size() != 3 * m_n) fail("displacement: {} values for {} nodes", u.size(), m_n);
+    for (std::size_t k = 0; k < u.size(); ++k) {
+        if (!std::isfinite(u[k])) fail("displacement: node {} is not finite", k / 3);
+        m_u[k] = m_u_prev[k] = static_cast<Real>(u[k]);
+    }
+}
+
+template <typename Real>
+std::vector<double> TledSolver<Real>::displacement_mm() const
+{
+    return {m_u.begin(), m_u.end()};
+}
+
+template <typename Real>
+std::vector<double> TledSolver<Real>::internal_forces_n()
+{
+    compute_internal_forces(m_u.data(), m_force.data());
+    return {m_force.begin(), m_force.end()};
+}
+
+template <typename Real>
+void TledSolver<Real>::compute_internal_forces(const Real* u, Real* f)
+{
+    const std::size_t dofs = 3 * m_n;
+    const int npe = m_model.nodes_per_element();
+    const std::int32_t* connectivity = m_model.connectivity().data();
+    const std::uint16_t* material = m_model.element_material().data();
+    const std::int32_t* geometry = m_model.element_geometry().data();
+    const MaterialLaw law = m_model.options().law;
+    const auto& colours = m_model.colours();
+    long inverted = LONG_MAX;
+#pragma omp parallel
+    {
+#pragma omp for schedule(static)
+        for (std::size_t k = 0; k < dofs; ++k) f[k] = 0;
+        for (const auto& colour : colours) {
+            const std::int32_t* elements = colour.data();
+            const long count = static_cast<long>(colour.size());
+#pragma omp for schedule(static) reduction(min : inverted)
+            for (long k = 0; k < count; ++k) {
+                const std::int32_t e = elements[k];
+                const std::int32_t g = geometry[e];
+                const std::uint16_t m = material[e];
+                Real j;
+                if (npe == 8)
+                    j = hexahedron_forces<Real>(connectivity + 8 * static_cast<std::size_t>(e), u, m_dn.data() + 24 * g,
+                                                m_gamma.data() + 32 * g, m_volume[g], m_hourglass[m] * m_vb2[g], law,
+                                                m_mu[m], m_lambda[m], m_kappa[m], f);
+                else
+                    j = tetrahedron_forces<Real>(connectivity + 4 * static_cast<std::size_t>(e), u, m_dn.data() + 12 * g,
+                                                 m_volume[g], law, m_mu[m], m_lambda[m], m_kappa[m], f);
+                if (!(j > Real(0))) inverted = std::min<long>(inverted, e);
+            }
+        }
+    }
+    m_inverted_element = inverted == LONG_MAX ? -1 : inverted;
+}
+
+template <typename Real>
+void TledSolver<Real>::constrain(Real* u, double load_factor, bool record_contacts)
+{
+    const Real s = static_cast<Real>(load_factor);
+    const std::size_t dofs = 3 * m_n;
+    for (std::size_t k = 0; k < dofs; ++k)
+        if (m_constrained[k]) u[k] = s * m_prescribed[k];
+    if (record_contacts) {
+        m_contact_normal_node.clear();
+        m_contact_normal.clear();
+    }
+    m_contact_count = 0;
+    for (const auto& indenter : m_loads.indenters)
+        for (auto node : m_model.surface_nodes()) {
+            Real* un = u + 3 * static_cast<std::size_t>(node);
+            const Real* xn = m_rest.data() + 3 * static_cast<std::size_t>(node);
+            const Vec3 x(double(xn[0] + un[0]), double(xn[1] + un[1]), double(xn[2] + un[2]));
+            Vec3 surface, normal;
+            if (!indenter.push_out(x, load_factor, surface, normal)) continue;
+            for (int d = 0; d < 3; ++d)
+                if (!m_constrained[3 * node + d]) un[d] = static_cast<Real>(surface[d] - double(xn[d]));
+            ++m_contact_count;
+            if (record_contacts) {
+                m_contact_normal_node.push_back(node);
+                m_contact_normal.push_back(normal);
+            }
+        }
+}
+
+template <typename Real>
+void TledSolver<Real>::check_state(const Real* u, const char* phase) const
+{
+    if (m_inverted_element >= 0)
+        fail("{} step {}: element {} is inverted (det F ≤ 0); the load is too large for this mesh, or the run "
+             "is unstable (reduce the time step or the load)",
+             phase, m_steps, m_inverted_element);
+    const double limit = 10.0 * m_model.diagonal_mm();
+    for (std::size_t k = 0; k < 3 * m_n; ++k)
+        if (!std::isfinite(double(u[k])) || std::abs(double(u[k])) > limit)
+            fail("{} step {}: the solution diverged at node {} (|u| = {:.3g} mm, model size {:.3g} mm)", phase, m_steps,
+                 k / 3, std::abs(double(u[k])), m_model.diagonal_mm());
+}
+
+template <typename Real>
+void TledSolver<Real>::advance(double duration_s, const ProgressCallback& progress)
+{
+    if (!(duration_s >= 0 && std::isfinite(duration_s))) fail("simulation duration {} s must be ≥ 0", duration_s);
+    const double dt = m_model.time_step_s();
+    const long steps = static_cast<long>(std::ceil(duration_s / dt - 1e-9));
+    const double alpha = m_model.options().damping_per_s;
+    const std::size_t dofs = 3 * m_n;
+    // u⁺ = A (R − F) + B u − C u⁻ per node (central differences with mass-proportional damping).
+    std::vector<Real> a(m_n), b(m_n), c(m_n);
+    for (std::size_t i = 0; i < m_n; ++i) {
+        const double m = m_model.lumped_mass()[i];
+        const double denominator = m / (dt * dt) + alpha * m / (2 * dt);
+        a[i] = static_cast<Real>(1.0 / denominator);
+        b[i] = static_cast<Real>(2.0 * m / (dt * dt) / denominator);
+        c[i] = static_cast<Real>((m / (dt * dt) - alpha * m / (2 * dt)) / denominator);
+    }
+    const long report_every = std::max<long>(1, steps / 100);
+    for (long step = 0; step < steps; ++step) {
+        const Real s = static_cast<Real>(m_loads.load_factor(m_time));
+        compute_internal_forces(m_u.data(), m_force.data());
+        check_state(m_u.data(), "dynamics");
+        Real* un = m_u_next.data();
+        const Real *u = m_u.data(), *up = m_u_prev.data(), *f = m_force.data(), *r = m_external.data();
+#pragma omp parallel for schedule(static)
+        for (std::size_t k = 0; k < dofs; ++k) {
+            const std::size_t i = k / 3;
+            un[k] = a[i] * (s * r[k] - f[k]) + b[i] * u[k] - c[i] * up[k];
+        }
+        m_time += dt;
+        ++m_steps;
+        constrain(un, m_loads.load_factor(m_time), false);
+        std::swap(m_u_prev, m_u);
+        std::swap(m_u, m_u_next);
+        if (progress && (step % report_every == 0 || step + 1 == steps)) progress(double(step + 1) / double(steps), m_steps);
+    }
+    compute_internal_forces(m_u.data(), m_force.data());
+    check_state(m_u.data(), "dynamics");
+}
+
+template <typename Real>
+SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& options, double load_factor,
+                                                 const ProgressCallback& progress)
+{
+    options.validate();
+    if (std::none_of(m_constrained.begin(), m_constrained.end(), [](std::uint8_t c) { return c != 0; }))
+        fail("equilibrium: the model is unconstrained (no fixed or prescribed node): static equilibrium is "
+             "undetermined; fix some nodes");
+    const auto start = std::chrono::steady_clock::now();
+    const std::size_t dofs = 3 * m_n;
+    // Pseudo-time step h = 1 and masses from the stiffness bound: every node is stable at h = 1.
+    std::vector<Real> inverse_mass(m_n);
+    std::vector<double> mass(m_n);
+    for (std::size_t i = 0; i < m_n; ++i) {
+        mass[i] = options.mass_safety * m_model.stiffness_bound()[i] / 4.0;
+        if (!(mass[i] > 0)) fail("node {} belongs to no element with stiffness", i);
+        inverse_mass[i] = static_cast<Real>(1.0 / mass[i]);
+    }
+    constrain(m_u.data(), load_factor, true);
+    m_u_prev = m_u; // start at rest
+    compute_internal_forces(m_u.data(), m_force.data());
+    check_state(m_u.data(), "equilibrium");
+    const Real s = static_cast<Real>(load_factor);
+    double damping = 0.0; // c; estimated after the first iteration
+    SolveSummary summary;
+    std::vector<double> increment_history;
+    const std::size_t blocks = (dofs + BLOCK - 1) / BLOCK;
+    std::vector<double> num(blocks), den(blocks);
+    // Contact dofs: the normal component of the residual is the contact reaction.
+    std::vector<std::uint8_t> in_contact(m_n, 0);
+    auto refresh_contact = [&] {
+        std::fill(in_contact.begin(), in_contact.end(), 0);
+        for (auto node : m_contact_normal_node) in_contact[node] = 1;
+    };
+    refresh_contact();
+    for (long iteration = 1; iteration <= options.max_iterations; ++iteration) {
+        const Real beta = static_cast<Real>((2.0 - damping) / (2.0 + damping));
+        const Real gain = static_cast<Real>(2.0 / (2.0 + damping));
+        Real* un = m_u_next.data();
+        const Real *u = m_u.data(), *up = m_u_prev.data(), *f = m_force.data(), *r = m_external.data();
+#pragma omp parallel for schedule(static)
+        for (std::size_t k = 0; k < dofs; ++k)
+            un[k] = u[k] + beta * (u[k] - up[k]) + gain * inverse_mass[k / 3] * (s * r[k] - f[k]);
+        constrain(un, load_factor, true);
+        refresh_contact();
+        std::swap(m_force_prev, m_force);
+        compute_internal_forces(un, m_force.data());
+        ++m_steps;
+        check_state(un, "equilibrium");
+        // Underwood's adaptive damping: ω² ≈ Σ u_i² K̂_ii / Σ m_i u_i², K̂_ii = ΔF_i / Δu_i.
+        double increment = 0.0, residual = 0.0, reference = 0.0;
+        const Real* fn = m_force.data();
+        const Real* fp = m_force_prev.data();
+#pragma omp parallel for schedule(static) reduction(max : increment, residual, reference)
+        for (std::size_t blk = 0; blk < blocks; ++blk) {
+            double nb = 0, db = 0;
+            const std::size_t end = std::min(dofs, (blk + 1) * BLOCK);
+            for (std::size_t k = blk * BLOCK; k < end; ++k) {
+                const double du = double(un[k]) - double(u[k]);
+                increment = std::max(increment, std::abs(du));
+                reference = std::max(reference, std::abs(double(fn[k])));
+                if (m_constrained[k]) continue;
+                const double uk = double(un[k]);
+                if (std::abs(du) > 1e-14 * (1.0 + std::abs(uk))) {
+                    const double khat = (double(fn[k]) - double(fp[k])) / du;
+                    nb += uk * uk * khat;
+                    db += mass[k / 3] * uk * uk;
+                }
+                if (!in_contact[k / 3]) residual = std::max(residual, std::abs(double(s * r[k] - fn[k])));
+            }
+            num[blk] = nb;
+            den[blk] = db;
+        }
+        // Contact nodes: only the tangential residual counts (frictionless contact).
+        for (std::size_t c = 0; c < m_contact_normal_node.size(); ++c) {
+            const std::size_t node = static_cast<std::size_t>(m_contact_normal_node[c]);
+            Vec3 res;
+            for (int d = 0; d < 3; ++d) res[d] = m_constrained[3 * node + d] ? 0.0 : double(s * r[3 * node + d] - fn[3 * node + d]);
+            res -= res.dot(m_contact_normal[c]) * m_contact_normal[c];
+            residual = std::max(residual, res.cwiseAbs().maxCoeff());
+        }
+        double sum_num = 0, sum_den = 0;
+        for (std::size_t blk = 0; blk < blocks; ++blk) {
+            sum_num += num[blk];
+            sum_den += den[blk];
+        }
+        if (sum_den > 0 && sum_num > 0) damping = 2.0 * std::sqrt(std::min(sum_num / sum_den, 4.0));
+        damping = std::min(damping, 1.9);
+        std::swap(m_u_prev, m_u);
+        std::swap(m_u, m_u_next);
+
+        increment_history.push_back(increment);
+        double rho = 1.0;
+        const std::size_t window = 20;
+        if (increment_history.size() > window) {
+            const double old = increment_history[increment_history.size() - 1 - window];
+            if (old > 0) rho = std::pow(increment / old, 1.0 / double(window));
+        }
+        const double estimate = rho < 1.0 ? rho / (1.0 - rho) * increment : std::numeric_limits<double>::infinity();
+        summary.iterations = iteration;
+        summary.residual_n = residual;
+        summary.reference_force_n = reference;
+        summary.estimated_error_mm = increment == 0.0 ? 0.0 : estimate;
+        const bool still = increment == 0.0 || estimate <= options.displacement_tolerance_mm;
+        const bool balanced = residual <= options.residual_tolerance * std::max(reference, 1e-30);
+        if (progress && iteration % 200 == 0) progress(-1.0, iteration);
+        if (still && balanced && iteration > 1) {
+            summary.status = SolveStatus::converged;
+            break;
+        }
+    }
+    summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    summary.message = summary.converged()
+                          ? fmt::format("equilibrium after {} iterations (residual {:.3g} N of {:.3g} N, distance {:.3g} mm)",
+                                        summary.iterations, summary.residual_n, summary.reference_force_n, summary.estimated_error_mm)
+                          : fmt::format("no equilibrium after {} iterations (residual {:.3g} N of {:.3g} N, distance {:.3g} mm)",
+                                        summary.iterations, summary.residual_n, summary.reference_force_n, summary.estimated_error_mm);
+    m_u_prev = m_u;
+    return summary;
+}
+
+template <typename Real>
+Energies TledSolver<Real>::energies() const
+{
+    Energies out;
+    const int npe = m_model.nodes_per_element();
+    const auto& conn = m_model.connectivity();
+    for (std::size_t e = 0; e < m_model.element_count(); ++e) {
+        const ElementGeometry& g = m_model.geometries()[m_model.element_geometry()[e]];
+        const ElasticMaterial& mat = m_model.materials()[m_model.element_material()[e]];
+        Mat3 f = Mat3::Identity();
+        for (int a = 0; a < npe; ++a) {
+            const std::size_t node = static_cast<std::size_t>(conn[npe * e + a]);
+            const Vec3 ua(double(m_u[3 * node]), double(m_u[3 * node + 1]), double(m_u[3 * node + 2]));
+            f += ua * Vec3(g.dn_dx[3 * a], g.dn_dx[3 * a + 1], g.dn_dx[3 * a + 2]).transpose();
+        }
+        out.strain_mj += g.volume_mm3 * strain_energy_density(m_model.options().law, mat, f);
+        if (npe == 8) {
+            const double k = m_model.options().hourglass_kappa * mat.dilatational_modulus_mpa() * g.volume_mm3 * g.b_squared / 8.0;
+            for (int m = 0; m < 4; ++m) {
+                Vec3 q = Vec3::Zero();
+                for (int a = 0; a < 8; ++a) {
+                    const std::size_t node = static_cast<std::size_t>(conn[8 * e + a]);
+                    q += g.gamma[4 * a + m] * Vec3(double(m_u[3 * node]), double(m_u[3 * node + 1]), double(m_u[3 * node + 2]));
+                }
+                out.hourglass_mj += 0.5 * k * q.squaredNorm();
+            }
+        }
+    }
+    const double dt = m_model.time_step_s();
+    for (std::size_t i = 0; i < m_n; ++i) {
+        Vec3 v;
+        for (int d = 0; d < 3; ++d) v[d] = (double(m_u[3 * i + d]) - double(m_u_prev[3 * i + d])) / dt;
+        out.kinetic_mj += 0.5 * m_model.lumped_mass()[i] * v.squaredNorm(); // t·mm²/s² = mJ
+    }
+    return out;
+}
+
+template class TledSolver<float>;
+template class TledSolver<double>;
+
+} // namespace physreg
