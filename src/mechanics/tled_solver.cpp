@@ -2,6 +2,7 @@
 
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
+#include "detail/hexahedron_kernel.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -12,67 +13,6 @@ namespace physreg {
 namespace {
 
 constexpr std::size_t BLOCK = 3 * 1024; // degrees of freedom per reduction block
-
-// Forces of one uniform-strain hexahedron with hourglass control, added into f. Returns det F.
-template <typename Real>
-inline Real hexahedron_forces(const std::int32_t* ids, const Real* u, const Real* b, const Real* gamma, Real volume,
-                              Real k_hourglass, MaterialLaw law, Real mu, Real lambda, Real kappa, Real* f)
-{
-    Real ux[8], uy[8], uz[8];
-    for (int a = 0; a < 8; ++a) {
-        const Real* ua = u + 3 * static_cast<std::size_t>(ids[a]);
-        ux[a] = ua[0];
-        uy[a] = ua[1];
-        uz[a] = ua[2];
-    }
-    Real F[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-    for (int a = 0; a < 8; ++a) {
-        const Real b0 = b[3 * a], b1 = b[3 * a + 1], b2 = b[3 * a + 2];
-        F[0] += ux[a] * b0;
-        F[1] += ux[a] * b1;
-        F[2] += ux[a] * b2;
-        F[3] += uy[a] * b0;
-        F[4] += uy[a] * b1;
-        F[5] += uy[a] * b2;
-        F[6] += uz[a] * b0;
-        F[7] += uz[a] * b1;
-        F[8] += uz[a] * b2;
-    }
-    Real P[9];
-    const Real j = first_piola_kirchhoff(law, mu, lambda, kappa, F, P);
-    for (int r = 0; r < 9; ++r) P[r] *= volume;
-    // Hourglass modes of the displacement.
-    Real qx[4] = {0, 0, 0, 0}, qy[4] = {0, 0, 0, 0}, qz[4] = {0, 0, 0, 0};
-    for (int a = 0; a < 8; ++a)
-        for (int m = 0; m < 4; ++m) {
-            const Real g = gamma[4 * a + m];
-            qx[m] += g * ux[a];
-            qy[m] += g * uy[a];
-            qz[m] += g * uz[a];
-        }
-    for (int m = 0; m < 4; ++m) {
-        qx[m] *= k_hourglass;
-        qy[m] *= k_hourglass;
-        qz[m] *= k_hourglass;
-    }
-    for (int a = 0; a < 8; ++a) {
-        const Real b0 = b[3 * a], b1 = b[3 * a + 1], b2 = b[3 * a + 2];
-        Real fx = P[0] * b0 + P[1] * b1 + P[2] * b2;
-        Real fy = P[3] * b0 + P[4] * b1 + P[5] * b2;
-        Real fz = P[6] * b0 + P[7] * b1 + P[8] * b2;
-        for (int m = 0; m < 4; ++m) {
-            const Real g = gamma[4 * a + m];
-            fx += g * qx[m];
-            fy += g * qy[m];
-            fz += g * qz[m];
-        }
-        Real* fa = f + 3 * static_cast<std::size_t>(ids[a]);
-        fa[0] += fx;
-        fa[1] += fy;
-        fa[2] += fz;
-    }
-    return j;
-}
 
 template <typename Real>
 inline Real tetrahedron_forces(const std::int32_t* ids, const Real* u, const Real* b, Real volume, MaterialLaw law,
@@ -146,6 +86,9 @@ void TledSolver<Real>::set_loads(Loads loads)
                     m_constrained[3 * node + d] = 1;
                     m_prescribed[3 * node + d] = static_cast<Real>(c.displacement_mm[d]);
                 }
+    m_constrained_dofs.clear();
+    for (std::size_t k = 0; k < m_constrained.size(); ++k)
+        if (m_constrained[k]) m_constrained_dofs.push_back(static_cast<std::int64_t>(k));
     std::fill(m_external.begin(), m_external.end(), Real(0));
     for (std::size_t k = 0; k < m_loads.external_forces_n.size(); ++k) m_external[k] = static_cast<Real>(m_loads.external_forces_n[k]);
 }
@@ -155,6 +98,7 @@ void TledSolver<Real>::reset()
 {
     std::fill(m_u.begin(), m_u.end(), Real(0));
     std::fill(m_u_prev.begin(), m_u_prev.end(), Real(0));
+    m_load_factor = 0.0;
     m_time = 0.0;
     m_steps = 0;
 }
@@ -185,48 +129,70 @@ std::vector<double> TledSolver<Real>::internal_forces_n()
 template <typename Real>
 void TledSolver<Real>::compute_internal_forces(const Real* u, Real* f)
 {
+    m_inverted_element = LONG_MAX;
+#pragma omp parallel
+    forces_in_parallel_region(u, f);
+    if (m_inverted_element == LONG_MAX) m_inverted_element = -1;
+}
+
+// Called by every thread of a parallel region (orphaned work-sharing). Records the smallest
+// inverted element in m_inverted_element (LONG_MAX: none).
+template <typename Real>
+void TledSolver<Real>::forces_in_parallel_region(const Real* u, Real* f)
+{
     const std::size_t dofs = 3 * m_n;
     const int npe = m_model.nodes_per_element();
     const std::int32_t* connectivity = m_model.connectivity().data();
     const std::uint16_t* material = m_model.element_material().data();
     const std::int32_t* geometry = m_model.element_geometry().data();
     const MaterialLaw law = m_model.options().law;
-    const auto& colours = m_model.colours();
+    const bool shared_geometry = m_model.geometries().size() == 1;
+    const detail::HexBatchData data{connectivity, material, geometry};
     long inverted = LONG_MAX;
-#pragma omp parallel
-    {
 #pragma omp for schedule(static)
-        for (std::size_t k = 0; k < dofs; ++k) f[k] = 0;
-        for (const auto& colour : colours) {
-            const std::int32_t* elements = colour.data();
-            const long count = static_cast<long>(colour.size());
-#pragma omp for schedule(static) reduction(min : inverted)
+    for (std::size_t k = 0; k < dofs; ++k) f[k] = 0;
+    for (const auto& colour : m_model.colours()) {
+        const std::int32_t* elements = colour.data();
+        const long count = static_cast<long>(colour.size());
+        if (npe == 8) {
+            constexpr int W = 8; // batches of W elements in SIMD lanes
+            const long batches = (count + W - 1) / W;
+#pragma omp for schedule(static)
+            for (long batch = 0; batch < batches; ++batch) {
+                const int in_batch = static_cast<int>(std::min<long>(W, count - batch * W));
+                const std::int32_t* first = elements + batch * W;
+                const int bad = shared_geometry
+                                    ? detail::hexahedron_batch<Real, W, true>(first, in_batch, data, u, m_dn.data(), m_gamma.data(),
+                                                                              m_volume.data(), m_vb2.data(), m_mu.data(), m_lambda.data(),
+                                                                              m_kappa.data(), m_hourglass.data(), law, f)
+                                    : detail::hexahedron_batch<Real, W, false>(first, in_batch, data, u, m_dn.data(), m_gamma.data(),
+                                                                               m_volume.data(), m_vb2.data(), m_mu.data(), m_lambda.data(),
+                                                                               m_kappa.data(), m_hourglass.data(), law, f);
+                if (bad >= 0) inverted = std::min<long>(inverted, first[bad]);
+            }
+        } else {
+#pragma omp for schedule(static)
             for (long k = 0; k < count; ++k) {
                 const std::int32_t e = elements[k];
                 const std::int32_t g = geometry[e];
                 const std::uint16_t m = material[e];
-                Real j;
-                if (npe == 8)
-                    j = hexahedron_forces<Real>(connectivity + 8 * static_cast<std::size_t>(e), u, m_dn.data() + 24 * g,
-                                                m_gamma.data() + 32 * g, m_volume[g], m_hourglass[m] * m_vb2[g], law,
-                                                m_mu[m], m_lambda[m], m_kappa[m], f);
-                else
-                    j = tetrahedron_forces<Real>(connectivity + 4 * static_cast<std::size_t>(e), u, m_dn.data() + 12 * g,
-                                                 m_volume[g], law, m_mu[m], m_lambda[m], m_kappa[m], f);
+                const Real j = tetrahedron_forces<Real>(connectivity + 4 * static_cast<std::size_t>(e), u, m_dn.data() + 12 * g,
+                                                        m_volume[g], law, m_mu[m], m_lambda[m], m_kappa[m], f);
                 if (!(j > Real(0))) inverted = std::min<long>(inverted, e);
             }
         }
     }
-    m_inverted_element = inverted == LONG_MAX ? -1 : inverted;
+    if (inverted != LONG_MAX) {
+#pragma omp critical(physreg_inverted)
+        m_inverted_element = std::min(m_inverted_element, inverted);
+    }
 }
 
 template <typename Real>
 void TledSolver<Real>::constrain(Real* u, double load_factor, bool record_contacts)
 {
     const Real s = static_cast<Real>(load_factor);
-    const std::size_t dofs = 3 * m_n;
-    for (std::size_t k = 0; k < dofs; ++k)
-        if (m_constrained[k]) u[k] = s * m_prescribed[k];
+    for (auto k : m_constrained_dofs) u[k] = s * m_prescribed[k];
     if (record_contacts) {
         m_contact_normal_node.clear();
         m_contact_normal.clear();
@@ -234,19 +200,27 @@ void TledSolver<Real>::constrain(Real* u, double load_factor, bool record_contac
     m_contact_count = 0;
     for (const auto& indenter : m_loads.indenters)
         for (auto node : m_model.surface_nodes()) {
-            Real* un = u + 3 * static_cast<std::size_t>(node);
-            const Real* xn = m_rest.data() + 3 * static_cast<std::size_t>(node);
-            const Vec3 x(double(xn[0] + un[0]), double(xn[1] + un[1]), double(xn[2] + un[2]));
-            Vec3 surface, normal;
-            if (!indenter.push_out(x, load_factor, surface, normal)) continue;
-            for (int d = 0; d < 3; ++d)
-                if (!m_constrained[3 * node + d]) un[d] = static_cast<Real>(surface[d] - double(xn[d]));
+            Vec3 normal;
+            if (!push_node_out(indenter, u, node, load_factor, normal)) continue;
             ++m_contact_count;
             if (record_contacts) {
                 m_contact_normal_node.push_back(node);
                 m_contact_normal.push_back(normal);
             }
         }
+}
+
+template <typename Real>
+bool TledSolver<Real>::push_node_out(const Indenter& indenter, Real* u, std::int32_t node, double load_factor, Vec3& normal) const
+{
+    Real* un = u + 3 * static_cast<std::size_t>(node);
+    const Real* xn = m_rest.data() + 3 * static_cast<std::size_t>(node);
+    const Vec3 x(double(xn[0] + un[0]), double(xn[1] + un[1]), double(xn[2] + un[2]));
+    Vec3 surface;
+    if (!indenter.push_out(x, load_factor, surface, normal)) return false;
+    for (int d = 0; d < 3; ++d)
+        if (!m_constrained[3 * node + d]) un[d] = static_cast<Real>(surface[d] - double(xn[d]));
+    return true;
 }
 
 template <typename Real>
@@ -281,24 +255,82 @@ void TledSolver<Real>::advance(double duration_s, const ProgressCallback& progre
         c[i] = static_cast<Real>((m / (dt * dt) - alpha * m / (2 * dt)) / denominator);
     }
     const long report_every = std::max<long>(1, steps / 100);
+    const double limit = 10.0 * m_model.diagonal_mm();
+    const auto& surface = m_model.surface_nodes();
+    const long surface_count = static_cast<long>(surface.size());
+    Real* buffers[3] = {m_u_prev.data(), m_u.data(), m_u_next.data()};
+    int previous = 0, current = 1, next = 2;
+    bool failed = false;
+    long failed_step = 0;
+    double largest = 0.0, step_largest = 0.0; // shared: reduced into by every thread each step
+    m_inverted_element = LONG_MAX;
+    // One parallel region for the whole run: no fork/join per step, the serial bookkeeping is a
+    // `single` section between barriers.
+#pragma omp parallel
     for (long step = 0; step < steps; ++step) {
+        const Real* u = buffers[current];
+        const Real* up = buffers[previous];
+        Real* un = buffers[next];
         const Real s = static_cast<Real>(m_loads.load_factor(m_time));
-        compute_internal_forces(m_u.data(), m_force.data());
-        check_state(m_u.data(), "dynamics");
-        Real* un = m_u_next.data();
-        const Real *u = m_u.data(), *up = m_u_prev.data(), *f = m_force.data(), *r = m_external.data();
-#pragma omp parallel for schedule(static)
+        forces_in_parallel_region(u, m_force.data());
+        const Real* f = m_force.data();
+        const Real* r = m_external.data();
+#pragma omp for schedule(static) reduction(max : step_largest)
         for (std::size_t k = 0; k < dofs; ++k) {
             const std::size_t i = k / 3;
             un[k] = a[i] * (s * r[k] - f[k]) + b[i] * u[k] - c[i] * up[k];
+            const double magnitude = std::abs(double(un[k]));
+            step_largest = std::max(step_largest, magnitude != magnitude ? std::numeric_limits<double>::infinity() : magnitude);
         }
-        m_time += dt;
-        ++m_steps;
-        constrain(un, m_loads.load_factor(m_time), false);
-        std::swap(m_u_prev, m_u);
-        std::swap(m_u, m_u_next);
-        if (progress && (step % report_every == 0 || step + 1 == steps)) progress(double(step + 1) / double(steps), m_steps);
+        const double s_next = m_loads.load_factor(m_time + dt);
+        const Real sn = static_cast<Real>(s_next);
+        const long constrained = static_cast<long>(m_constrained_dofs.size());
+#pragma omp for schedule(static)
+        for (long k = 0; k < constrained; ++k) un[m_constrained_dofs[k]] = sn * m_prescribed[m_constrained_dofs[k]];
+        for (const auto& indenter : m_loads.indenters) {
+#pragma omp for schedule(static)
+            for (long k = 0; k < surface_count; ++k) {
+                Vec3 normal;
+                push_node_out(indenter, un, surface[k], s_next, normal);
+            }
+        }
+#pragma omp single
+        {
+            largest = step_largest;
+            step_largest = 0.0;
+            m_time += dt;
+            ++m_steps;
+            if (m_inverted_element != LONG_MAX || !(largest <= limit)) {
+                failed = true;
+                failed_step = m_steps;
+            }
+            previous = current;
+            current = next;
+            next = 3 - previous - current;
+            if (progress && (step % report_every == 0 || step + 1 == steps)) progress(double(step + 1) / double(steps), m_steps);
+        }
+        if (failed) break;
     }
+    // Put the buffers back in place: m_u now, m_u_prev one step before.
+    std::vector<Real>* vectors[3] = {&m_u_prev, &m_u, &m_u_next};
+    std::vector<Real> now = std::move(*vectors[current]), before = std::move(*vectors[previous]), spare = std::move(*vectors[next]);
+    m_u = std::move(now);
+    m_u_prev = std::move(before);
+    m_u_next = std::move(spare);
+    if (failed) {
+        if (m_inverted_element != LONG_MAX) {
+            const long element = m_inverted_element;
+            m_inverted_element = -1;
+            fail("dynamics step {}: element {} is inverted (det F ≤ 0); the load is too large for this mesh, or "
+                 "the run is unstable (reduce the time step or the load)",
+                 failed_step, element);
+        }
+        m_inverted_element = -1;
+        check_state(m_u.data(), "dynamics");
+        fail("dynamics step {}: the solution diverged (|u| = {:.3g} mm, model size {:.3g} mm)", failed_step, largest,
+             m_model.diagonal_mm());
+    }
+    m_inverted_element = -1;
     compute_internal_forces(m_u.data(), m_force.data());
     check_state(m_u.data(), "dynamics");
 }
@@ -321,11 +353,17 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
         if (!(mass[i] > 0)) fail("node {} belongs to no element with stiffness", i);
         inverse_mass[i] = static_cast<Real>(1.0 / mass[i]);
     }
-    constrain(m_u.data(), load_factor, true);
+    // Prescribed displacements and tools move from the last equilibrium's load level to the new one
+    // over the first iterations (a smooth ramp), so that a large step does not invert elements.
+    const double start_factor = m_load_factor;
+    const long ramp = start_factor == load_factor ? 0 : options.ramp_iterations;
+    auto factor_at = [&](long iteration) {
+        return ramp == 0 ? load_factor : start_factor + (load_factor - start_factor) * smooth_step(double(iteration) / double(ramp));
+    };
+    constrain(m_u.data(), factor_at(0), true);
     m_u_prev = m_u; // start at rest
     compute_internal_forces(m_u.data(), m_force.data());
     check_state(m_u.data(), "equilibrium");
-    const Real s = static_cast<Real>(load_factor);
     double damping = 0.0; // c; estimated after the first iteration
     SolveSummary summary;
     std::vector<double> increment_history;
@@ -339,6 +377,8 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
     };
     refresh_contact();
     for (long iteration = 1; iteration <= options.max_iterations; ++iteration) {
+        const double factor = factor_at(iteration);
+        const Real s = static_cast<Real>(factor);
         const Real beta = static_cast<Real>((2.0 - damping) / (2.0 + damping));
         const Real gain = static_cast<Real>(2.0 / (2.0 + damping));
         Real* un = m_u_next.data();
@@ -346,7 +386,7 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
 #pragma omp parallel for schedule(static)
         for (std::size_t k = 0; k < dofs; ++k)
             un[k] = u[k] + beta * (u[k] - up[k]) + gain * inverse_mass[k / 3] * (s * r[k] - f[k]);
-        constrain(un, load_factor, true);
+        constrain(un, factor, true);
         refresh_contact();
         std::swap(m_force_prev, m_force);
         compute_internal_forces(un, m_force.data());
@@ -393,6 +433,9 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
         damping = std::min(damping, 1.9);
         std::swap(m_u_prev, m_u);
         std::swap(m_u, m_u_next);
+        // A node pushed out by a tool stops: no momentum carries it back into the tool.
+        for (auto node : m_contact_normal_node)
+            for (int d = 0; d < 3; ++d) m_u_prev[3 * node + d] = m_u[3 * node + d];
 
         increment_history.push_back(increment);
         double rho = 1.0;
@@ -409,7 +452,7 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
         const bool still = increment == 0.0 || estimate <= options.displacement_tolerance_mm;
         const bool balanced = residual <= options.residual_tolerance * std::max(reference, 1e-30);
         if (progress && iteration % 200 == 0) progress(-1.0, iteration);
-        if (still && balanced && iteration > 1) {
+        if (still && balanced && iteration > ramp) {
             summary.status = SolveStatus::converged;
             break;
         }
@@ -421,6 +464,7 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
                           : fmt::format("no equilibrium after {} iterations (residual {:.3g} N of {:.3g} N, distance {:.3g} mm)",
                                         summary.iterations, summary.residual_n, summary.reference_force_n, summary.estimated_error_mm);
     m_u_prev = m_u;
+    m_load_factor = load_factor;
     return summary;
 }
 

@@ -26,6 +26,8 @@ struct EquilibriumOptions {
     double residual_tolerance = 1e-4;
     /// Margin on the Gershgorin mass scaling (nonlinear stiffening); raise if DR diverges.
     double mass_safety = 2.0;
+    /// Iterations over which constraints and tools move from the previous load level to the new.
+    long ramp_iterations = 200;
     void validate() const;
 };
 
@@ -83,6 +85,8 @@ public:
 
 private:
     void compute_internal_forces(const Real* u, Real* f);
+    void forces_in_parallel_region(const Real* u, Real* f);
+    bool push_node_out(const Indenter& indenter, Real* u, std::int32_t node, double load_factor, Vec3& normal) const;
     void constrain(Real* u, double load_factor, bool record_contacts);
     void check_state(const Real* u, const char* phase) const;
     std::vector<double> block_sums(const std::function<void(std::size_t, std::size_t, double*)>& partial, int values) const;
@@ -97,10 +101,12 @@ private:
     std::vector<Real> m_u, m_u_prev, m_u_next, m_force, m_force_prev, m_external;
     std::vector<std::uint8_t> m_constrained; ///< 3 per node: 1 if the dof is prescribed
     std::vector<Real> m_prescribed;          ///< 3 per node at load factor 1
+    std::vector<std::int64_t> m_constrained_dofs;
     std::vector<std::int32_t> m_contact_normal_node;
     std::vector<Vec3> m_contact_normal;
     std::size_t m_contact_count = 0;
     double m_time = 0.0;
+    double m_load_factor = 0.0; ///< load level of the last equilibrium (warm start)
     long m_steps = 0;
     mutable long m_inverted_element = -1;
 };
