@@ -81,6 +81,39 @@ bool Indenter::push_out(const Vec3& x, double s, Vec3& surface_point, Vec3& norm
     return false;
 }
 
+void Indenter::closest_surface_point(const Vec3& x, double s, Vec3& surface_point, Vec3& normal) const
+{
+    if (push_out(x, s, surface_point, normal)) return;
+    const Vec3 c = position(s);
+    switch (shape) {
+    case IndenterShape::sphere: {
+        const Vec3 d = x - c;
+        normal = d.norm() > 0 ? Vec3(d.normalized()) : Vec3::UnitZ();
+        surface_point = c + radius_mm * normal;
+        return;
+    }
+    case IndenterShape::cylinder: {
+        const Vec3 d = x - c;
+        const Vec3 radial = d - d.dot(axis) * axis;
+        normal = radial.norm() > 0 ? Vec3(radial.normalized()) : axis.unitOrthogonal();
+        surface_point = x + (radius_mm - radial.norm()) * normal;
+        return;
+    }
+    case IndenterShape::plane:
+        normal = axis;
+        surface_point = x - (x - c).dot(axis) * axis;
+        return;
+    case IndenterShape::box: {
+        const Vec3 local = rotation.transpose() * (x - c);
+        const Vec3 clamped = local.cwiseMax(-half_extents_mm).cwiseMin(half_extents_mm);
+        surface_point = c + rotation * clamped;
+        const Vec3 d = local - clamped;
+        normal = d.norm() > 0 ? Vec3(rotation * d.normalized()) : Vec3(rotation.col(0));
+        return;
+    }
+    }
+}
+
 void Indenter::validate() const
 {
     const std::string who = "indenter '" + name + "'";

@@ -38,6 +38,8 @@ struct Indenter {
     /// If `x` is inside the tool at load factor s, the closest point of its surface and the
     /// outward normal there; otherwise false.
     bool push_out(const Vec3& x, double load_factor, Vec3& surface_point, Vec3& normal) const;
+    /// The closest point of the tool's surface to `x` (inside or outside) and the outward normal.
+    void closest_surface_point(const Vec3& x, double load_factor, Vec3& surface_point, Vec3& normal) const;
     void validate() const;
 };
 

@@ -1,7 +1,8 @@
 #pragma once
 // Total Lagrangian Explicit Dynamics: central differences with lumped mass and mass-proportional
-// damping (paper 000 eq. 8), and dynamic relaxation to static equilibrium (Underwood's adaptive
-// damping with per-node mass scaling, as Joldes, Wittek & Miller use for TLED).
+// damping (paper 000 eq. 8), and dynamic relaxation to static equilibrium (adaptive damping from
+// the Rayleigh quotient of the increment, per-node mass scaling and the convergence estimate of
+// Joldes, Wittek & Miller's adaptive dynamic relaxation for TLED).
 //
 // Threads: elements are processed colour by colour; no two elements of a colour share a node, so
 // each thread adds its forces straight into the nodal array. Every node receives its element
@@ -20,7 +21,7 @@ struct EquilibriumOptions {
     long max_iterations = 100000;
     /// Converged when the estimated distance to equilibrium (ρ/(1−ρ)·|Δu|∞, ρ the observed
     /// contraction of increments) is below this, mm ...
-    double displacement_tolerance_mm = 1e-5;
+    double displacement_tolerance_mm = 1e-3;
     /// ... and the largest residual force on a free degree of freedom is below this fraction of
     /// the largest internal nodal force (N/N).
     double residual_tolerance = 1e-4;
@@ -88,6 +89,7 @@ private:
     void forces_in_parallel_region(const Real* u, Real* f);
     bool push_node_out(const Indenter& indenter, Real* u, std::int32_t node, double load_factor, Vec3& normal) const;
     void constrain(Real* u, double load_factor, bool record_contacts);
+    void constrain_with_active_set(Real* u, double load_factor, const Real* forces, Real s);
     void check_state(const Real* u, const char* phase) const;
     std::vector<double> block_sums(const std::function<void(std::size_t, std::size_t, double*)>& partial, int values) const;
 
@@ -105,6 +107,7 @@ private:
     std::vector<std::int32_t> m_contact_normal_node;
     std::vector<Vec3> m_contact_normal;
     std::size_t m_contact_count = 0;
+    std::vector<int> m_active_tool; ///< dynamic relaxation: the tool a node is held against, -1 none
     double m_time = 0.0;
     double m_load_factor = 0.0; ///< load level of the last equilibrium (warm start)
     long m_steps = 0;
