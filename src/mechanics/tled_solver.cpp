@@ -132,14 +132,14 @@ void TledSolver<Real>::compute_internal_forces(const Real* u, Real* f)
 {
     m_inverted_element = LONG_MAX;
 #pragma omp parallel
-    forces_in_parallel_region(u, f);
+    forces_in_parallel_region(u, f, true);
     if (m_inverted_element == LONG_MAX) m_inverted_element = -1;
 }
 
 // Called by every thread of a parallel region (orphaned work-sharing). Records the smallest
 // inverted element in m_inverted_element (LONG_MAX: none).
 template <typename Real>
-void TledSolver<Real>::forces_in_parallel_region(const Real* u, Real* f)
+void TledSolver<Real>::forces_in_parallel_region(const Real* u, Real* f, bool zero_first)
 {
     const std::size_t dofs = 3 * m_n;
     const int npe = m_model.nodes_per_element();
@@ -150,36 +150,39 @@ void TledSolver<Real>::forces_in_parallel_region(const Real* u, Real* f)
     const bool shared_geometry = m_model.geometries().size() == 1;
     const detail::HexBatchData data{connectivity, material, geometry};
     long inverted = LONG_MAX;
+    if (zero_first) {
 #pragma omp for schedule(static)
-    for (std::size_t k = 0; k < dofs; ++k) f[k] = 0;
-    for (const auto& colour : m_model.colours()) {
-        const std::int32_t* elements = colour.data();
-        const long count = static_cast<long>(colour.size());
-        if (npe == 8) {
-            constexpr int W = 8; // batches of W elements in SIMD lanes
-            const long batches = (count + W - 1) / W;
+        for (std::size_t k = 0; k < dofs; ++k) f[k] = 0;
+    }
+    const std::int32_t* order = m_model.element_order().data();
+    for (const auto& phase : m_model.phases()) {
+        const long chunks = static_cast<long>(phase.size());
 #pragma omp for schedule(static)
-            for (long batch = 0; batch < batches; ++batch) {
-                const int in_batch = static_cast<int>(std::min<long>(W, count - batch * W));
-                const std::int32_t* first = elements + batch * W;
-                const int bad = shared_geometry
-                                    ? detail::hexahedron_batch<Real, W, true>(first, in_batch, data, u, m_dn.data(), m_gamma.data(),
-                                                                              m_volume.data(), m_vb2.data(), m_mu.data(), m_lambda.data(),
-                                                                              m_kappa.data(), m_hourglass.data(), law, f)
-                                    : detail::hexahedron_batch<Real, W, false>(first, in_batch, data, u, m_dn.data(), m_gamma.data(),
-                                                                               m_volume.data(), m_vb2.data(), m_mu.data(), m_lambda.data(),
-                                                                               m_kappa.data(), m_hourglass.data(), law, f);
-                if (bad >= 0) inverted = std::min<long>(inverted, first[bad]);
-            }
-        } else {
-#pragma omp for schedule(static)
-            for (long k = 0; k < count; ++k) {
-                const std::int32_t e = elements[k];
-                const std::int32_t g = geometry[e];
-                const std::uint16_t m = material[e];
-                const Real j = tetrahedron_forces<Real>(connectivity + 4 * static_cast<std::size_t>(e), u, m_dn.data() + 12 * g,
-                                                        m_volume[g], law, m_mu[m], m_lambda[m], m_kappa[m], f);
-                if (!(j > Real(0))) inverted = std::min<long>(inverted, e);
+        for (long chunk = 0; chunk < chunks; ++chunk) {
+            const std::int64_t begin = phase[chunk].begin, end = phase[chunk].end;
+            if (npe == 8) {
+                constexpr int W = 8; // batches of W elements in SIMD lanes
+                for (std::int64_t first = begin; first < end; first += W) {
+                    const int in_batch = static_cast<int>(std::min<std::int64_t>(W, end - first));
+                    const std::int32_t* elements = order + first;
+                    const int bad = shared_geometry
+                                        ? detail::hexahedron_batch<Real, W, true>(elements, in_batch, data, u, m_dn.data(), m_gamma.data(),
+                                                                                  m_volume.data(), m_vb2.data(), m_mu.data(), m_lambda.data(),
+                                                                                  m_kappa.data(), m_hourglass.data(), law, f)
+                                        : detail::hexahedron_batch<Real, W, false>(elements, in_batch, data, u, m_dn.data(), m_gamma.data(),
+                                                                                   m_volume.data(), m_vb2.data(), m_mu.data(), m_lambda.data(),
+                                                                                   m_kappa.data(), m_hourglass.data(), law, f);
+                    if (bad >= 0) inverted = std::min<long>(inverted, elements[bad]);
+                }
+            } else {
+                for (std::int64_t k = begin; k < end; ++k) {
+                    const std::int32_t e = order[k];
+                    const std::int32_t g = geometry[e];
+                    const std::uint16_t m = material[e];
+                    const Real j = tetrahedron_forces<Real>(connectivity + 4 * static_cast<std::size_t>(e), u, m_dn.data() + 12 * g,
+                                                            m_volume[g], law, m_mu[m], m_lambda[m], m_kappa[m], f);
+                    if (!(j > Real(0))) inverted = std::min<long>(inverted, e);
+                }
             }
         }
     }
@@ -302,6 +305,7 @@ void TledSolver<Real>::advance(double duration_s, const ProgressCallback& progre
     const double limit = 10.0 * m_model.diagonal_mm();
     const auto& surface = m_model.surface_nodes();
     const long surface_count = static_cast<long>(surface.size());
+    const bool has_external = !m_loads.external_forces_n.empty();
     Real* buffers[3] = {m_u_prev.data(), m_u.data(), m_u_next.data()};
     int previous = 0, current = 1, next = 2;
     bool failed = false;
@@ -316,15 +320,28 @@ void TledSolver<Real>::advance(double duration_s, const ProgressCallback& progre
         const Real* up = buffers[previous];
         Real* un = buffers[next];
         const Real s = static_cast<Real>(m_loads.load_factor(m_time));
-        forces_in_parallel_region(u, m_force.data());
-        const Real* f = m_force.data();
+        // Forces accumulate into an array the update loop below has already zeroed.
+        forces_in_parallel_region(u, m_force.data(), step == 0);
+        Real* f = m_force.data();
         const Real* r = m_external.data();
+        if (has_external) {
 #pragma omp for schedule(static) reduction(max : step_largest)
-        for (std::size_t k = 0; k < dofs; ++k) {
-            const std::size_t i = k / 3;
-            un[k] = a[i] * (s * r[k] - f[k]) + b[i] * u[k] - c[i] * up[k];
-            const double magnitude = std::abs(double(un[k]));
-            step_largest = std::max(step_largest, magnitude != magnitude ? std::numeric_limits<double>::infinity() : magnitude);
+            for (std::size_t k = 0; k < dofs; ++k) {
+                const std::size_t i = k / 3;
+                un[k] = a[i] * (s * r[k] - f[k]) + b[i] * u[k] - c[i] * up[k];
+                f[k] = 0;
+                const double magnitude = std::abs(double(un[k]));
+                step_largest = std::max(step_largest, magnitude != magnitude ? std::numeric_limits<double>::infinity() : magnitude);
+            }
+        } else {
+#pragma omp for schedule(static) reduction(max : step_largest)
+            for (std::size_t k = 0; k < dofs; ++k) {
+                const std::size_t i = k / 3;
+                un[k] = b[i] * u[k] - c[i] * up[k] - a[i] * f[k];
+                f[k] = 0;
+                const double magnitude = std::abs(double(un[k]));
+                step_largest = std::max(step_largest, magnitude != magnitude ? std::numeric_limits<double>::infinity() : magnitude);
+            }
         }
         const double s_next = m_loads.load_factor(m_time + dt);
         const Real sn = static_cast<Real>(s_next);

@@ -1,7 +1,8 @@
 #pragma once
 // Everything TLED precomputes in the reference configuration (Miller, Joldes, Lance, Wittek 2007):
 // shape-function derivatives, volumes, hourglass vectors, lumped masses, per-element materials,
-// the critical time step, and an element colouring that lets threads scatter forces without races.
+// the critical time step, and a partition of the elements that lets threads scatter forces without
+// races.
 //
 // Hexahedra are Flanagan–Belytschko uniform-strain elements (one-point integration with the mean
 // derivative b_a = (1/V) ∫ ∂N_a/∂X dV, exact for any trilinear hexahedron) with the hourglass
@@ -58,8 +59,15 @@ public:
     /// Per node: a Gershgorin bound of the row of the linearised stiffness, N/mm. Dynamic
     /// relaxation scales masses with it so that every node has the same stable step.
     const std::vector<double>& stiffness_bound() const { return m_stiffness_bound; }
-    /// Elements grouped so that no two elements of one colour share a node.
-    const std::vector<std::vector<std::int32_t>>& colours() const { return m_colours; }
+    /// The force loop's work: phases run one after another; the chunks of a phase run in parallel,
+    /// each chunk's elements in order on one thread. Chunks of one phase share no node, so threads
+    /// add forces into nodes without races, and every node receives its contributions in the same
+    /// order whatever the thread count. Chunks index element_order().
+    struct Chunk {
+        std::int64_t begin, end;
+    };
+    const std::vector<std::vector<Chunk>>& phases() const { return m_phases; }
+    const std::vector<std::int32_t>& element_order() const { return m_element_order; }
     /// Nodes on the mesh boundary (candidates for contact).
     const std::vector<std::int32_t>& surface_nodes() const { return m_surface_nodes; }
 
@@ -83,7 +91,9 @@ private:
     std::vector<ElasticMaterial> m_materials;
     std::vector<std::int32_t> m_material_labels;
     std::vector<double> m_mass, m_stiffness_bound;
-    std::vector<std::vector<std::int32_t>> m_colours;
+    std::vector<std::vector<Chunk>> m_phases;
+    std::vector<std::int32_t> m_element_order;
+    void build_work_partition(const VolumeMesh& mesh);
     std::vector<std::int32_t> m_surface_nodes;
     double m_critical_dt = 0.0, m_diagonal = 0.0;
     std::int32_t m_critical_element = -1;

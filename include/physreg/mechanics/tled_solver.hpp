@@ -86,7 +86,7 @@ public:
 
 private:
     void compute_internal_forces(const Real* u, Real* f);
-    void forces_in_parallel_region(const Real* u, Real* f);
+    void forces_in_parallel_region(const Real* u, Real* f, bool zero_first);
     bool push_node_out(const Indenter& indenter, Real* u, std::int32_t node, double load_factor, Vec3& normal) const;
     void constrain(Real* u, double load_factor, bool record_contacts);
     void constrain_with_active_set(Real* u, double load_factor, const Real* forces, Real s);

@@ -1,0 +1,81 @@
+#include "mechanics_fixtures.hpp"
+#include "physreg/core/error.hpp"
+#include "physreg/io/mesh_io.hpp"
+#include "physreg/mechanics/simulation.hpp"
+
+#include <fstream>
+
+namespace physreg {
+namespace {
+
+std::string error_of(const std::function<void()>& f)
+{
+    try {
+        f();
+    } catch (const Error& e) {
+        return e.what();
+    }
+    return "";
+}
+
+const char* kCase = R"(mesh: block.vtu
+tissues: tissues.yaml
+solver: {mode: static, load_steps: 2}
+constraints:
+  - name: base
+    select: {face: z_min}
+    fixed: [x, y, z]
+  - name: top
+    select: {face: z_max}
+    displacement_mm: [0, 0, -1]
+output: {directory: out, frames: 2}
+)";
+
+} // namespace
+
+TEST(MechanicsSimulationCase, ReadsAndRunsACase)
+{
+    test::TempDir dir;
+    write_volume_mesh(dir / "block.vtu", test::block_mesh(4, 4, 4, 2.0));
+    std::ofstream(dir / "tissues.yaml") << "tissues: [{label: 1, name: t, young_modulus_pa: 3000, poisson_ratio: 0.45}]\n";
+    std::ofstream(dir / "case.yaml") << kCase;
+    const SimulationCase c = read_simulation_case(dir / "case.yaml");
+    EXPECT_EQ(c.mesh_file, dir / "block.vtu");
+    EXPECT_EQ(c.load_steps, 2);
+    ASSERT_EQ(c.constraints.size(), 2u);
+    EXPECT_EQ(c.constraints[1].displacement_mm, Vec3(0, 0, -1));
+    const SimulationResult r = run_simulation(c, {});
+    ASSERT_EQ(r.frames.size(), 2u);
+    ASSERT_EQ(r.equilibria.size(), 2u);
+    EXPECT_TRUE(r.equilibria[1].converged());
+    // The top face moved by the prescribed −1 mm.
+    const auto top = test::nodes_at(r.mesh, 2, 8.0);
+    for (auto n : top) EXPECT_NEAR(r.frames.back().displacement_mm[3 * n + 2], -1.0, 1e-12);
+}
+
+TEST(MechanicsSimulationCase, BadCasesNameTheKeyAndReason)
+{
+    test::TempDir dir;
+    write_volume_mesh(dir / "block.vtu", test::block_mesh(2, 2, 2, 2.0));
+    std::ofstream(dir / "tissues.yaml") << "tissues: [{label: 1, name: t, young_modulus_pa: 3000, poisson_ratio: 0.45}]\n";
+    auto with = [&](const std::string& from, const std::string& to) {
+        std::string text = kCase;
+        text.replace(text.find(from), from.size(), to);
+        std::ofstream(dir / "bad.yaml") << text;
+        return dir / "bad.yaml";
+    };
+    EXPECT_NE(error_of([&] { read_simulation_case(with("output: {directory: out, frames: 2}", "")); }).find("output.directory"),
+              std::string::npos);
+    EXPECT_NE(error_of([&] { read_simulation_case(with("face: z_min", "face: w_min")); }).find("w_min"), std::string::npos);
+    EXPECT_NE(error_of([&] { read_simulation_case(with("mode: static", "mode: sideways")); }).find("sideways"), std::string::npos);
+    EXPECT_NE(error_of([&] { read_simulation_case(with("mode: static", "mode: dynamic")); }).find("duration_s"), std::string::npos);
+    EXPECT_NE(error_of([&] { run_simulation(read_simulation_case(with("face: z_min", "nodes: [0, 4000]")), {}); }).find("node 4000 does not exist"),
+              std::string::npos);
+    EXPECT_NE(error_of([&] { run_simulation(read_simulation_case(with("load_steps: 2", "load_steps: 2, time_step_s: 1.0")), {}); })
+                  .find("above the critical time step"),
+              std::string::npos);
+    std::ofstream(dir / "tissues.yaml") << "tissues: [{label: 1, name: t, young_modulus_pa: 3000, poisson_ratio: 0.5}]\n";
+    EXPECT_NE(error_of([&] { run_simulation(read_simulation_case(dir / "bad.yaml"), {}); }).find("poisson_ratio"), std::string::npos);
+}
+
+} // namespace physreg
