@@ -91,5 +91,39 @@ expect_no_file "$work/x.vtu"
 expect_error "coarsen needs a grid mesh" "uniform grid" "$physreg" coarsen "$work/t.msh" --grid 5x5x5 -o "$work/x.vtu"
 expect_error "unknown subcommand" "" "$physreg" frobnicate
 
+# simulate: a static push and a short dynamic run on the demo's coarse mesh.
+cat > "$work/push.yaml" <<CASE
+mesh: $d/mesh_coarse.vtu
+tissues: $d/tissues.yaml
+solver: {mode: static, load_steps: 2}
+constraints:
+  - {name: back, select: {face: y_max, tolerance_mm: 3}, fixed: [x, y, z]}
+  - {name: push, select: {box: {min: [-45, -80, -15], max: [-15, -50, 15]}, surface_only: true}, displacement_mm: [0, 5, 0]}
+output: {directory: sim, frames: 2, field_spacing_mm: 4}
+CASE
+expect_ok "simulate static" "$physreg" simulate "$work/push.yaml" --json
+for f in frames.pvd frame_0001.vtu frame_0002.vtu final.vtu displacement_field.nii.gz displacement_mask.nii.gz summary.json; do
+  expect_file "$work/sim/$f"
+done
+grep -q '"max_displacement_mm"' "$work/out.txt" && pass || failed "simulate --json summary"
+expect_ok "info field" "$physreg" info "$work/sim/displacement_field.nii.gz" --json
+grep -q '"displacement_field"' "$work/out.txt" && pass || failed "the field reads back as a 3-component image"
+expect_ok "locate with field" "$physreg" landmarks locate "$work/sim/final.vtu" "$d/landmarks.csv" --field displacement -o "$work/moved.csv"
+grep -q "displacement_2" "$work/moved.csv" && pass || failed "displacement interpolated at landmarks"
+sed 's/mode: static, load_steps: 2/mode: dynamic, duration_s: 0.002, ramp_time_s: 0.001, damping_per_s: 50/; s/directory: sim/directory: dyn/' "$work/push.yaml" > "$work/dyn.yaml"
+expect_ok "simulate dynamic" "$physreg" simulate "$work/dyn.yaml"
+expect_file "$work/dyn/final.vtu"
+printf 'tissues:\n  - {label: 1, name: p, young_modulus_pa: 2e5, poisson_ratio: 0.5}\n  - {label: 2, name: v, young_modulus_pa: 1e6, poisson_ratio: 0.49}\n  - {label: 3, name: t, young_modulus_pa: 5e6, poisson_ratio: 0.49}\n' > "$work/nu.yaml"
+sed "s|tissues: .*|tissues: $work/nu.yaml|; s/directory: sim/directory: bad1/" "$work/push.yaml" > "$work/bad1.yaml"
+expect_error "simulate: impossible Poisson ratio" "poisson_ratio" "$physreg" simulate "$work/bad1.yaml"
+[ -z "$(ls -A "$work/bad1" 2>/dev/null)" ] && pass || failed "no outputs after a refused case"
+sed 's/load_steps: 2/load_steps: 2, time_step_s: 1.0/; s/directory: sim/directory: bad2/' "$work/push.yaml" > "$work/bad2.yaml"
+expect_error "simulate: time step above critical" "above the critical time step" "$physreg" simulate "$work/bad2.yaml"
+sed 's/displacement_mm: \[0, 5, 0\]/displacement_mm: [0, 500, 0]/; s/directory: sim/directory: bad3/' "$work/push.yaml" > "$work/bad3.yaml"
+expect_error "simulate: crushing load" "inverted" "$physreg" simulate "$work/bad3.yaml"
+[ -z "$(ls -A "$work/bad3" 2>/dev/null)" ] && pass || failed "no outputs after an inverted run"
+sed 's/face: y_max/nodes: [0, 99999999]/; s/, tolerance_mm: 3//; s/directory: sim/directory: bad4/' "$work/push.yaml" > "$work/bad4.yaml"
+expect_error "simulate: missing nodes" "does not exist" "$physreg" simulate "$work/bad4.yaml"
+
 echo "$passes passed, $failures failed"
 [ "$failures" -eq 0 ]
