@@ -41,3 +41,13 @@ TissueTable load_tissues(const std::string& path);
 void check_output_path(const std::filesystem::path& path, const std::string& option);
 
 } // namespace physreg::cli
+
+namespace physreg {
+struct SimulationCase;
+struct SimulationResult;
+namespace cli {
+/// Writes frames, the ParaView collection, final.vtu, the dense displacement field and mask and
+/// summary.json into the case's output directory (staged: nothing appears if a write fails).
+nlohmann::json write_simulation_outputs(const SimulationCase& c, const SimulationResult& result);
+} // namespace cli
+} // namespace physreg

@@ -47,6 +47,58 @@ private:
 
 } // namespace
 
+nlohmann::json write_simulation_outputs(const SimulationCase& c, const SimulationResult& result)
+{
+    StagingDirectory staging(c.output_directory);
+    std::string pvd = "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n";
+    double largest = 0.0;
+    for (std::size_t k = 0; k < result.frames.size(); ++k) {
+        const auto& frame = result.frames[k];
+        MeshData frame_data;
+        frame_data.point_data.push_back({"displacement", 3, frame.displacement_mm});
+        const std::string name = fmt::format("frame_{:04d}.vtu", k + 1);
+        write_vtu(staging.path() / name, result.mesh, frame_data);
+        const double stamp = c.dynamic ? frame.time_s : frame.load_factor;
+        pvd += fmt::format("<DataSet timestep=\"{}\" file=\"{}\"/>\n", stamp, name);
+    }
+    pvd += "</Collection>\n</VTKFile>\n";
+    write_atomically(staging.path() / "frames.pvd", [&](const fs::path& tmp) { std::ofstream(tmp) << pvd; });
+    const auto& final_u = result.frames.back().displacement_mm;
+    for (std::size_t n = 0; n < result.mesh.node_count(); ++n)
+        largest = std::max(largest, Vec3(final_u[3 * n], final_u[3 * n + 1], final_u[3 * n + 2]).norm());
+    MeshData final_data;
+    final_data.point_data.push_back({"displacement", 3, final_u});
+    write_vtu(staging.path() / "final.vtu", result.mesh, final_data);
+    // The dense field on the label volume's grid (or a grid over the mesh).
+    ImageGeometry geometry = (result.label_geometry && c.field_spacing_mm == 0.0)
+                                 ? *result.label_geometry
+                                 : image_grid_over_mesh(result.mesh, c.field_spacing_mm > 0 ? c.field_spacing_mm : 2.0);
+    const SampledField field = sample_displacement_field(result.mesh, final_u, geometry);
+    write_displacement_field(staging.path() / "displacement_field.nii.gz", field.field);
+    LabelVolume mask{geometry, {field.inside.begin(), field.inside.end()}};
+    write_label_volume(staging.path() / "displacement_mask.nii.gz", mask);
+
+    nlohmann::json equilibria = nlohmann::json::array();
+    for (const auto& s : result.equilibria)
+        equilibria.push_back({{"iterations", s.iterations}, {"residual_n", s.residual_n}, {"reference_force_n", s.reference_force_n},
+                              {"estimated_error_mm", s.estimated_error_mm}, {"seconds", s.seconds}});
+    nlohmann::json summary = {{"case", c.source.string()},
+                              {"mode", c.dynamic ? "dynamic" : "static"},
+                              {"precision", c.single_precision ? "single" : "double"},
+                              {"material_law", to_string(c.tled.law)},
+                              {"mesh", mesh_summary(result.mesh)},
+                              {"critical_time_step_s", result.critical_time_step_s},
+                              {"time_step_s", result.time_step_s},
+                              {"steps", result.steps},
+                              {"equilibria", equilibria},
+                              {"max_displacement_mm", largest},
+                              {"seconds", result.seconds},
+                              {"outputs", {"frames.pvd", "final.vtu", "displacement_field.nii.gz", "displacement_mask.nii.gz"}}};
+    write_atomically(staging.path() / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
+    staging.commit();
+    return summary;
+}
+
 void add_subcommand_simulate(CLI::App& app)
 {
     struct Options : CommonOptions {
@@ -62,57 +114,9 @@ void add_subcommand_simulate(CLI::App& app)
         const SimulationResult result = run_simulation(c, [&](double f, const std::string& m) { bar.update(f, m); });
         bar.finish();
 
-        StagingDirectory staging(c.output_directory);
-        MeshData data;
-        std::ofstream pvd_stream;
-        std::string pvd = "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n";
-        double largest = 0.0;
-        for (std::size_t k = 0; k < result.frames.size(); ++k) {
-            const auto& frame = result.frames[k];
-            MeshData frame_data;
-            frame_data.point_data.push_back({"displacement", 3, frame.displacement_mm});
-            const std::string name = fmt::format("frame_{:04d}.vtu", k + 1);
-            write_vtu(staging.path() / name, result.mesh, frame_data);
-            const double stamp = c.dynamic ? frame.time_s : frame.load_factor;
-            pvd += fmt::format("<DataSet timestep=\"{}\" file=\"{}\"/>\n", stamp, name);
-        }
-        pvd += "</Collection>\n</VTKFile>\n";
-        write_atomically(staging.path() / "frames.pvd", [&](const fs::path& tmp) { std::ofstream(tmp) << pvd; });
-        const auto& final_u = result.frames.back().displacement_mm;
-        for (std::size_t n = 0; n < result.mesh.node_count(); ++n)
-            largest = std::max(largest, Vec3(final_u[3 * n], final_u[3 * n + 1], final_u[3 * n + 2]).norm());
-        MeshData final_data;
-        final_data.point_data.push_back({"displacement", 3, final_u});
-        write_vtu(staging.path() / "final.vtu", result.mesh, final_data);
-        // The dense field on the label volume's grid (or a grid over the mesh).
-        ImageGeometry geometry = (result.label_geometry && c.field_spacing_mm == 0.0)
-                                     ? *result.label_geometry
-                                     : image_grid_over_mesh(result.mesh, c.field_spacing_mm > 0 ? c.field_spacing_mm : 2.0);
-        const SampledField field = sample_displacement_field(result.mesh, final_u, geometry);
-        write_displacement_field(staging.path() / "displacement_field.nii.gz", field.field);
-        LabelVolume mask{geometry, {field.inside.begin(), field.inside.end()}};
-        write_label_volume(staging.path() / "displacement_mask.nii.gz", mask);
-
-        nlohmann::json equilibria = nlohmann::json::array();
-        for (const auto& s : result.equilibria)
-            equilibria.push_back({{"iterations", s.iterations}, {"residual_n", s.residual_n}, {"reference_force_n", s.reference_force_n},
-                                  {"estimated_error_mm", s.estimated_error_mm}, {"seconds", s.seconds}});
-        nlohmann::json summary = {{"case", o->case_file},
-                                  {"mode", c.dynamic ? "dynamic" : "static"},
-                                  {"precision", c.single_precision ? "single" : "double"},
-                                  {"material_law", to_string(c.tled.law)},
-                                  {"mesh", mesh_summary(result.mesh)},
-                                  {"critical_time_step_s", result.critical_time_step_s},
-                                  {"time_step_s", result.time_step_s},
-                                  {"steps", result.steps},
-                                  {"equilibria", equilibria},
-                                  {"max_displacement_mm", largest},
-                                  {"seconds", result.seconds},
-                                  {"outputs", {"frames.pvd", "final.vtu", "displacement_field.nii.gz", "displacement_mask.nii.gz"}}};
-        write_atomically(staging.path() / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
-        staging.commit();
-        logger()->info("simulated {} steps in {:.2f} s; max displacement {:.3f} mm → '{}'", result.steps, result.seconds, largest,
-                       c.output_directory.string());
+        const nlohmann::json summary = write_simulation_outputs(c, result);
+        logger()->info("simulated {} steps in {:.2f} s; max displacement {:.3f} mm → '{}'", result.steps, result.seconds,
+                       summary["max_displacement_mm"].get<double>(), c.output_directory.string());
         report(*o, summary);
     });
 }
