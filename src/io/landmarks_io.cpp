@@ -7,6 +7,7 @@
 #include <charconv>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -72,6 +73,22 @@ double parse_number(const std::string& text, const std::string& where)
     return v;
 }
 
+// "# Key = value" comment lines of CSV/fcsv headers: the lower-case key and the value, or nothing.
+std::optional<std::pair<std::string, std::string>> header_setting(const std::string& line)
+{
+    const auto eq = line.find('=');
+    if (line.empty() || line[0] != '#' || eq == std::string::npos) return std::nullopt;
+    return std::pair{lower(trim(line.substr(1, eq - 1))), trim(line.substr(eq + 1))};
+}
+
+// CoordinateSystem values: RAS or 0 → true, LPS or 1 → false.
+bool is_ras(const std::string& value, const std::string& what)
+{
+    if (value == "RAS" || value == "0") return true;
+    if (value == "LPS" || value == "1") return false;
+    fail("{}: unknown coordinate system '{}'", what, value);
+}
+
 Vec3 to_lps(const Vec3& p, bool ras) { return ras ? Vec3(-p[0], -p[1], p[2]) : p; }
 
 std::string csv_quote(const std::string& s)
@@ -92,12 +109,11 @@ LandmarkSet read_csv(std::istream& in, const std::string& what)
         line = trim(line);
         if (line.empty()) continue;
         if (line[0] == '#') {
-            const auto eq = line.find('=');
-            if (eq == std::string::npos) continue;
-            const std::string key = lower(trim(line.substr(1, eq - 1))), value = trim(line.substr(eq + 1));
+            const auto setting = header_setting(line);
+            if (!setting) continue;
+            const auto& [key, value] = *setting;
             if (key == "coordinate_system" || key == "coordinatesystem") {
-                if (value == "RAS" || value == "0") ras = true;
-                else if (value != "LPS" && value != "1") fail("{}: unknown coordinate system '{}'", what, value);
+                ras = is_ras(value, what);
             } else if (key == "units" && lower(value) != "mm") {
                 fail("{}: units '{}' are not supported (landmarks are in mm)", what, value);
             }
@@ -150,15 +166,11 @@ LandmarkSet read_fcsv(std::istream& in, const std::string& what)
         line = trim(line);
         if (line.empty()) continue;
         if (line[0] == '#') {
-            const auto eq = line.find('=');
-            if (eq == std::string::npos) continue;
-            const std::string key = lower(trim(line.substr(1, eq - 1))), value = trim(line.substr(eq + 1));
+            const auto setting = header_setting(line);
+            if (!setting) continue;
+            const auto& [key, value] = *setting;
             if (key.find("markups fiducial file version") != std::string::npos) saw_version = true;
-            if (key == "coordinatesystem") {
-                if (value == "RAS" || value == "0") ras = true;
-                else if (value == "LPS" || value == "1") ras = false;
-                else fail("{}: unknown CoordinateSystem '{}'", what, value);
-            }
+            if (key == "coordinatesystem") ras = is_ras(value, what);
             if (key == "columns") {
                 columns.clear();
                 for (const auto& c : split_csv(value)) columns.push_back(c);

@@ -1,5 +1,7 @@
 #include "test_support.hpp"
 
+#include "physreg/core/error.hpp"
+
 #include <Eigen/Geometry>
 #include <cstdlib>
 
@@ -39,6 +41,16 @@ LabelVolume make_volume(Index3 size, const std::function<std::uint16_t(int, int,
         for (int j = 0; j < size[1]; ++j)
             for (int i = 0; i < size[0]; ++i) v.labels[static_cast<std::size_t>(v.geometry.linear_index(i, j, k))] = label(i, j, k);
     return v;
+}
+
+std::string error_message(const std::function<void()>& f)
+{
+    try {
+        f();
+    } catch (const Error& e) {
+        return e.what();
+    }
+    return "";
 }
 
 Mat3 oblique_rotation()

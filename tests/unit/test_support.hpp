@@ -30,6 +30,9 @@ LabelVolume make_volume(Index3 size, const std::function<std::uint16_t(int, int,
 /// A proper rotation (det +1) about an oblique axis.
 Mat3 oblique_rotation();
 
+/// The message of the physreg::Error that `f` throws, or "" when it throws none.
+std::string error_message(const std::function<void()>& f);
+
 /// ../shared/data next to the checkout, or empty when it is absent.
 std::filesystem::path shared_data_dir();
 

@@ -15,15 +15,7 @@ void expect_same_geometry(const ImageGeometry& a, const ImageGeometry& b, double
     EXPECT_LT((a.direction - b.direction).cwiseAbs().maxCoeff(), tolerance);
 }
 
-std::string error_of(const std::function<void()>& f)
-{
-    try {
-        f();
-    } catch (const Error& e) {
-        return e.what();
-    }
-    return "";
-}
+std::string error_of(const std::function<void()>& f) { return test::error_message(f); }
 
 LabelVolume oblique_volume()
 {

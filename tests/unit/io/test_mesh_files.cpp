@@ -36,15 +36,7 @@ std::string read_all(const std::filesystem::path& p)
     return {(std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>()};
 }
 
-std::string error_of(const std::function<void()>& f)
-{
-    try {
-        f();
-    } catch (const Error& e) {
-        return e.what();
-    }
-    return "";
-}
+std::string error_of(const std::function<void()>& f) { return test::error_message(f); }
 
 } // namespace
 

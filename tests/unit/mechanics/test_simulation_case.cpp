@@ -8,15 +8,7 @@
 namespace physreg {
 namespace {
 
-std::string error_of(const std::function<void()>& f)
-{
-    try {
-        f();
-    } catch (const Error& e) {
-        return e.what();
-    }
-    return "";
-}
+std::string error_of(const std::function<void()>& f) { return test::error_message(f); }
 
 const char* kCase = R"(mesh: block.vtu
 tissues: tissues.yaml

@@ -20,15 +20,7 @@ double label_volume(const VolumeMesh& mesh, std::int32_t label)
     return 0.0;
 }
 
-std::string error_of(const std::function<void()>& f)
-{
-    try {
-        f();
-    } catch (const Error& e) {
-        return e.what();
-    }
-    return "";
-}
+std::string error_of(const std::function<void()>& f) { return test::error_message(f); }
 
 } // namespace
 
