@@ -8,9 +8,9 @@ find_package(fmt REQUIRED)
 find_package(spdlog REQUIRED)
 find_package(OpenMP REQUIRED COMPONENTS CXX)
 find_package(ZLIB REQUIRED)
-# ITK only behind src/io/image_io.cpp: its headers are heavy and stay out of our public API. We do
+# ITK only behind src/io/itk_bridge.cpp: its headers are heavy and stay out of our public API. We do
 # not include ITK_USE_FILE: it would put ITK's bundled Eigen on every target's include path ahead
-# of Debian's Eigen 3.4. The image IO factories are registered explicitly in image_io.cpp.
+# of Debian's Eigen 3.4. The image IO factories are registered explicitly in itk_bridge.cpp.
 find_package(ITK 5.2 REQUIRED COMPONENTS
   ITKCommon ITKIOImageBase ITKIONIFTI ITKIONRRD ITKIOMeta ITKIOGDCM)
 find_package(pugixml REQUIRED)
