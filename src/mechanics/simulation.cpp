@@ -119,6 +119,13 @@ SimulationCase read_simulation_case(const fs::path& path)
         c.ramp_time_s = r.number(solver, "ramp_time_s", where, 0.0);
         c.tled.damping_per_s = r.number(solver, "damping_per_s", where, c.tled.damping_per_s);
         c.tled.hourglass_kappa = r.number(solver, "hourglass_kappa", where, c.tled.hourglass_kappa);
+        if (solver["hourglass_modulus"]) {
+            const auto m = r.get<std::string>(solver["hourglass_modulus"], "hourglass_modulus", where);
+            if (m != "shear" && m != "dilatational") fail("{}: solver.hourglass_modulus '{}' must be shear or dilatational", r.what, m);
+            c.tled.hourglass_modulus = m == "shear" ? TledOptions::HourglassModulus::shear : TledOptions::HourglassModulus::dilatational;
+        }
+        if (solver["averaged_nodal_pressure"])
+            c.tled.averaged_nodal_pressure = r.get<bool>(solver["averaged_nodal_pressure"], "averaged_nodal_pressure", where);
         c.tled.time_step_safety = r.number(solver, "time_step_safety", where, c.tled.time_step_safety);
         c.tled.density_scale = r.number(solver, "density_scale", where, c.tled.density_scale);
         if (solver["time_step_s"]) c.time_step_s = r.number(solver, "time_step_s", where);

@@ -139,6 +139,12 @@ void TledModel::build_work_partition(const VolumeMesh& mesh)
     }
 }
 
+double hourglass_modulus_mpa(const TledOptions& options, const ElasticMaterial& material)
+{
+    return options.hourglass_modulus == TledOptions::HourglassModulus::shear ? 2.0 * material.mu_mpa
+                                                                              : material.dilatational_modulus_mpa();
+}
+
 double strain_energy_density(MaterialLaw law, const ElasticMaterial& m, const Mat3& f)
 {
     const double j = f.determinant();
@@ -231,7 +237,7 @@ TledModel::TledModel(const VolumeMesh& mesh, const TissueTable& tissues, const T
         const double modulus = m.dilatational_modulus_mpa();
         double sum_b = 0.0;
         for (int a = 0; a < npe; ++a) sum_b += Vec3(g.dn_dx[3 * a], g.dn_dx[3 * a + 1], g.dn_dx[3 * a + 2]).norm();
-        const double hourglass = npe == 8 ? options.hourglass_kappa * modulus * g.volume_mm3 * g.b_squared / 8.0 : 0.0;
+        const double hourglass = npe == 8 ? options.hourglass_kappa * hourglass_modulus_mpa(options, m) * g.volume_mm3 * g.b_squared / 8.0 : 0.0;
         const auto ids = mesh.cell(e);
         for (int a = 0; a < npe; ++a) {
             m_mass[ids[a]] += node_mass;
@@ -248,6 +254,13 @@ TledModel::TledModel(const VolumeMesh& mesh, const TissueTable& tissues, const T
         }
     }
 
+    if (options.averaged_nodal_pressure) {
+        if (m_cell_type != CellType::tetrahedron) fail("averaged_nodal_pressure applies to tetrahedra only");
+        if (options.law != MaterialLaw::neo_hookean) fail("averaged_nodal_pressure needs the Neo-Hookean law");
+        m_nodal_volume.assign(n, 0.0);
+        for (std::size_t e = 0; e < e_count; ++e)
+            for (auto id : mesh.cell(e)) m_nodal_volume[id] += m_geometries[m_element_geometry[e]].volume_mm3 / 4.0;
+    }
     build_work_partition(mesh);
     for (const auto& face : match_faces(mesh))
         if (face.neighbour < 0)

@@ -16,17 +16,24 @@ namespace {
 constexpr std::size_t BLOCK = 3 * 1024; // degrees of freedom per reduction block
 
 template <typename Real>
-inline Real tetrahedron_forces(const std::int32_t* ids, const Real* u, const Real* b, Real volume, MaterialLaw law,
-                               Real mu, Real lambda, Real kappa, Real* f)
+inline void tetrahedron_deformation(const std::int32_t* ids, const Real* u, const Real* b, Real* F)
 {
-    Real F[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    for (int k = 0; k < 9; ++k) F[k] = (k % 4 == 0) ? Real(1) : Real(0);
     for (int a = 0; a < 4; ++a) {
         const Real* ua = u + 3 * static_cast<std::size_t>(ids[a]);
         for (int r = 0; r < 3; ++r)
             for (int c = 0; c < 3; ++c) F[3 * r + c] += ua[r] * b[3 * a + c];
     }
+}
+
+template <typename Real>
+inline Real tetrahedron_forces(const std::int32_t* ids, const Real* u, const Real* b, Real volume, MaterialLaw law,
+                               Real mu, Real lambda, Real kappa, Real* f, Real volumetric_j = Real(0))
+{
+    Real F[9];
+    tetrahedron_deformation(ids, u, b, F);
     Real P[9];
-    const Real j = first_piola_kirchhoff(law, mu, lambda, kappa, F, P);
+    const Real j = first_piola_kirchhoff(law, mu, lambda, kappa, F, P, volumetric_j);
     for (int a = 0; a < 4; ++a) {
         Real* fa = f + 3 * static_cast<std::size_t>(ids[a]);
         for (int r = 0; r < 3; ++r)
@@ -59,9 +66,14 @@ TledSolver<Real>::TledSolver(const TledModel& model) : m_model(model), m_n(model
         m_mu.push_back(static_cast<Real>(m.mu_mpa));
         m_lambda.push_back(static_cast<Real>(m.lambda_mpa));
         m_kappa.push_back(static_cast<Real>(m.kappa_mpa));
-        m_hourglass.push_back(static_cast<Real>(model.options().hourglass_kappa * m.dilatational_modulus_mpa() / 8.0));
+        m_hourglass.push_back(static_cast<Real>(model.options().hourglass_kappa * hourglass_modulus_mpa(model.options(), m) / 8.0));
     }
     m_rest.assign(model.rest_positions().begin(), model.rest_positions().end());
+    if (model.options().averaged_nodal_pressure) {
+        m_nodal_j.assign(m_n, 1);
+        m_inverse_nodal_volume.resize(m_n);
+        for (std::size_t i = 0; i < m_n; ++i) m_inverse_nodal_volume[i] = static_cast<Real>(1.0 / model.nodal_volume()[i]);
+    }
     const std::size_t dofs = 3 * m_n;
     m_u.assign(dofs, 0);
     m_u_prev.assign(dofs, 0);
@@ -155,6 +167,30 @@ void TledSolver<Real>::forces_in_parallel_region(const Real* u, Real* f, bool ze
         for (std::size_t k = 0; k < dofs; ++k) f[k] = 0;
     }
     const std::int32_t* order = m_model.element_order().data();
+    const bool anp = npe == 4 && m_model.options().averaged_nodal_pressure;
+    if (anp) {
+        // Averaged nodal pressure, pass 1: J̄ at the nodes = Σ V_e J_e / 4 / Σ V_e / 4.
+        Real* nodal = m_nodal_j.data();
+#pragma omp for schedule(static)
+        for (std::size_t i = 0; i < m_n; ++i) nodal[i] = 0;
+        for (const auto& phase : m_model.phases()) {
+            const long chunks = static_cast<long>(phase.size());
+#pragma omp for schedule(static)
+            for (long chunk = 0; chunk < chunks; ++chunk)
+                for (std::int64_t k = phase[chunk].begin; k < phase[chunk].end; ++k) {
+                    const std::int32_t e = order[k];
+                    const std::int32_t g = geometry[e];
+                    const std::int32_t* ids = connectivity + 4 * static_cast<std::size_t>(e);
+                    Real F[9];
+                    tetrahedron_deformation(ids, u, m_dn.data() + 12 * g, F);
+                    const Real j = F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) +
+                                   F[2] * (F[3] * F[7] - F[4] * F[6]);
+                    for (int a = 0; a < 4; ++a) nodal[ids[a]] += m_volume[g] * j / Real(4);
+                }
+        }
+#pragma omp for schedule(static)
+        for (std::size_t i = 0; i < m_n; ++i) nodal[i] *= m_inverse_nodal_volume[i];
+    }
     for (const auto& phase : m_model.phases()) {
         const long chunks = static_cast<long>(phase.size());
 #pragma omp for schedule(static)
@@ -179,8 +215,11 @@ void TledSolver<Real>::forces_in_parallel_region(const Real* u, Real* f, bool ze
                     const std::int32_t e = order[k];
                     const std::int32_t g = geometry[e];
                     const std::uint16_t m = material[e];
-                    const Real j = tetrahedron_forces<Real>(connectivity + 4 * static_cast<std::size_t>(e), u, m_dn.data() + 12 * g,
-                                                            m_volume[g], law, m_mu[m], m_lambda[m], m_kappa[m], f);
+                    const std::int32_t* ids = connectivity + 4 * static_cast<std::size_t>(e);
+                    Real jbar = 0;
+                    if (anp) jbar = (m_nodal_j[ids[0]] + m_nodal_j[ids[1]] + m_nodal_j[ids[2]] + m_nodal_j[ids[3]]) / Real(4);
+                    const Real j = tetrahedron_forces<Real>(ids, u, m_dn.data() + 12 * g, m_volume[g], law, m_mu[m], m_lambda[m],
+                                                            m_kappa[m], f, jbar);
                     if (!(j > Real(0))) inverted = std::min<long>(inverted, e);
                 }
             }
@@ -559,7 +598,7 @@ Energies TledSolver<Real>::energies() const
         }
         out.strain_mj += g.volume_mm3 * strain_energy_density(m_model.options().law, mat, f);
         if (npe == 8) {
-            const double k = m_model.options().hourglass_kappa * mat.dilatational_modulus_mpa() * g.volume_mm3 * g.b_squared / 8.0;
+            const double k = m_model.options().hourglass_kappa * hourglass_modulus_mpa(m_model.options(), mat) * g.volume_mm3 * g.b_squared / 8.0;
             for (int m = 0; m < 4; ++m) {
                 Vec3 q = Vec3::Zero();
                 for (int a = 0; a < 8; ++a) {

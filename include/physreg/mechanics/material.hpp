@@ -36,9 +36,12 @@ struct ElasticMaterial {
 ElasticMaterial material_from_tissue(const Tissue& tissue);
 
 /// First Piola–Kirchhoff stress P (MPa) for F (row-major 3×3), written to `p`. Returns J = det F.
+/// `volumetric_j` > 0 (Neo-Hookean only) replaces J in the pressure κ(J − 1): the averaged-nodal-
+/// pressure tetrahedron passes the volume change averaged over the element's nodes.
 /// Templated on the scalar so single and double precision kernels share it.
 template <typename Real>
-inline Real first_piola_kirchhoff(MaterialLaw law, Real mu, Real lambda, Real kappa, const Real* f, Real* p)
+inline Real first_piola_kirchhoff(MaterialLaw law, Real mu, Real lambda, Real kappa, const Real* f, Real* p,
+                                  Real volumetric_j = Real(0))
 {
     const Real j = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) +
                    f[2] * (f[3] * f[7] - f[4] * f[6]);
@@ -80,7 +83,9 @@ inline Real first_piola_kirchhoff(MaterialLaw law, Real mu, Real lambda, Real ka
         const Real cbrt_j = std::cbrt(j);
         const Real mu_j = mu / (cbrt_j * cbrt_j); // μ J^(-2/3)
         const Real third_trace = (cm[0] + cm[1] + cm[2]) / Real(3);
-        const Real vol = kappa * j * (j - Real(1));
+        // Averaged nodal pressure: the pressure κ(J̄ − 1) from a smoothed J̄ when one is given.
+        const Real jp = volumetric_j > Real(0) ? volumetric_j : j;
+        const Real vol = kappa * j * (jp - Real(1));
         const Real a = vol - mu_j * third_trace; // coefficient of C⁻¹
         s[0] = mu_j + a * ci0;
         s[1] = mu_j + a * ci1;

@@ -99,6 +99,7 @@ private:
     // Model data in the solver's precision.
     std::vector<Real> m_dn, m_gamma, m_volume, m_vb2, m_mu, m_lambda, m_kappa, m_hourglass;
     std::vector<Real> m_rest;
+    std::vector<Real> m_nodal_j, m_inverse_nodal_volume; ///< averaged nodal pressure (tetrahedra)
     // State: displacement now and one step before, forces, scratch.
     std::vector<Real> m_u, m_u_prev, m_u_next, m_force, m_force_prev, m_external;
     std::vector<std::uint8_t> m_constrained; ///< 3 per node: 1 if the dof is prescribed
