@@ -99,7 +99,7 @@ inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBa
         F[3][w] = f3; F[4][w] = f4; F[5][w] = f5;
         F[6][w] = f6; F[7][w] = f7; F[8][w] = f8;
     }
-    alignas(64) Real J[W], S[6][W];
+    alignas(64) Real J[W];
 #pragma omp simd
     for (int w = 0; w < W; ++w)
         J[w] = F[0][w] * (F[4][w] * F[8][w] - F[5][w] * F[7][w]) - F[1][w] * (F[3][w] * F[8][w] - F[5][w] * F[6][w]) +

@@ -2,7 +2,9 @@
 #include "physreg/io/image_io.hpp"
 #include "test_support.hpp"
 
+#include <cstring>
 #include <fstream>
+#include <zlib.h>
 
 namespace physreg {
 namespace {
@@ -74,6 +76,32 @@ TEST(IoImage, ScalarImageAndDisplacementFieldRoundTrip)
         expect_same_geometry(f.geometry, field.geometry, 1e-5);
         EXPECT_EQ(f.components, field.components);
     }
+}
+
+TEST(IoImage, DisplacementFieldNiftiHeaderIsWhatAntsAndSlicerRead)
+{
+    // A displacement-field transform in NIfTI: 5-D (x, y, z, t = 1, 3 components), intent 1007
+    // (NIFTI_INTENT_VECTOR), float32.
+    test::TempDir dir;
+    DisplacementField field;
+    field.geometry = oblique_volume().geometry;
+    field.components.assign(3 * static_cast<std::size_t>(field.geometry.voxel_count()), 0.5f);
+    write_displacement_field(dir / "u.nii.gz", field);
+    gzFile file = gzopen((dir / "u.nii.gz").string().c_str(), "rb");
+    ASSERT_NE(file, nullptr);
+    char header[348];
+    ASSERT_EQ(gzread(file, header, sizeof(header)), 348);
+    gzclose(file);
+    std::int16_t dim[8], intent, datatype;
+    std::memcpy(dim, header + 40, sizeof(dim));
+    std::memcpy(&intent, header + 68, 2);
+    std::memcpy(&datatype, header + 70, 2);
+    EXPECT_EQ(dim[0], 5);
+    EXPECT_EQ(dim[1], 7);
+    EXPECT_EQ(dim[4], 1);
+    EXPECT_EQ(dim[5], 3);
+    EXPECT_EQ(intent, 1007);
+    EXPECT_EQ(datatype, 16);
 }
 
 TEST(IoImage, BadFilesGiveClearErrors)
