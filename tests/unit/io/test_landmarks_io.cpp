@@ -17,12 +17,7 @@ LandmarkSet sample()
 
 std::string error_of(const std::filesystem::path& p)
 {
-    try {
-        read_landmarks(p);
-    } catch (const Error& e) {
-        return e.what();
-    }
-    return "";
+    return test::error_message([&] { read_landmarks(p); });
 }
 
 } // namespace

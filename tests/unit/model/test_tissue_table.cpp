@@ -9,12 +9,7 @@ namespace {
 
 std::string error_of(const std::filesystem::path& path)
 {
-    try {
-        read_tissue_table(path);
-    } catch (const Error& e) {
-        return e.what();
-    }
-    return "";
+    return test::error_message([&] { read_tissue_table(path); });
 }
 
 } // namespace
