@@ -12,5 +12,5 @@ find_package(ZLIB REQUIRED)
 # not include ITK_USE_FILE: it would put ITK's bundled Eigen on every target's include path ahead
 # of Debian's Eigen 3.4. The image IO factories are registered explicitly in itk_bridge.cpp.
 find_package(ITK 5.2 REQUIRED COMPONENTS
-  ITKCommon ITKIOImageBase ITKIONIFTI ITKIONRRD ITKIOMeta ITKIOGDCM)
+  ITKCommon ITKIOImageBase ITKIONIFTI ITKIONRRD ITKIOMeta ITKIOGDCM ITKIOPNG)
 find_package(pugixml REQUIRED)

@@ -24,6 +24,7 @@ void add_subcommand_landmarks(CLI::App& app);
 void add_subcommand_convert(CLI::App& app);
 void add_subcommand_demo(CLI::App& app);
 void add_subcommand_simulate(CLI::App& app);
+void add_subcommand_phantom(CLI::App& app);
 
 nlohmann::json to_json(const ImageGeometry& geometry);
 nlohmann::json to_json(const HexGrid& grid);

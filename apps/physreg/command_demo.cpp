@@ -19,6 +19,8 @@
 #include "physreg/phantom/synthetic_phantom.hpp"
 #include "progress.hpp"
 
+#include "physreg/phantom/dataset.hpp"
+
 #include <chrono>
 #include <fstream>
 #include <iostream>
@@ -50,7 +52,7 @@ void add_subcommand_demo(CLI::App& app)
         const Index3 coarse_grid = parse_grid_dims(o->coarse, "--coarse-grid");
         fs::create_directories(o->output);
         const fs::path dir(o->output);
-        auto step = [](int n, const std::string& text) { logger()->info("[{}/7] {}", n, text); };
+        auto step = [](int n, const std::string& text) { logger()->info("[{}/8] {}", n, text); };
 
         step(1, "synthetic liver label volume");
         auto t0 = clock::now();
@@ -130,6 +132,14 @@ void add_subcommand_demo(CLI::App& app)
         long iterations = 0;
         for (const auto& e : simulated.equilibria) iterations += e.iterations;
 
+        step(8, "phantom experiment dataset (CIRS-057A-like anatomy, small preset; `physreg phantom` makes the full one)");
+        ProgressDisplay phantom_bar("phantom");
+        const auto dataset = nlohmann::json::parse(
+            generate_phantom_dataset(PhantomSpec::preset_spec("small"), dir / "phantom", true,
+                                     [&](double f, const std::string& m) { phantom_bar.update(f, m); })
+                .summary_json);
+        phantom_bar.finish();
+
         nlohmann::json summary = {
             {"output_directory", dir.string()},
             {"label_volume", to_json(phantom.labels.geometry)},
@@ -141,6 +151,10 @@ void add_subcommand_demo(CLI::App& app)
             {"tetrahedra", tets.cell_count()},
             {"landmarks", located},
             {"indentation", simulation},
+            {"phantom_dataset", {{"directory", (dir / "phantom").string()}, {"states", dataset["states"].size()},
+                                 {"ground_truth_nodes", dataset["ground_truth"]["nodes"]},
+                                 {"ground_truth_elements", dataset["ground_truth"]["elements"]},
+                                 {"seconds", dataset["timings"]["total_s"]}}},
             {"timings_ms", {{"phantom", phantom_ms}, {"voxel_mesh", voxel_ms}, {"grid_mesh", grid_ms},
                             {"coarsen_and_embed", coarse_ms}, {"surfaces_and_tetrahedra", surface_ms}}}};
         write_atomically(dir / "summary.json", [&](const fs::path& tmp) {
@@ -166,6 +180,9 @@ void add_subcommand_demo(CLI::App& app)
                   << fmt::format("TLED indentation (coarse model, Neo-Hookean, 10 mm sphere travel): {} iterations of dynamic "
                                  "relaxation over 4 tool positions, {:.1f} s, max displacement {:.2f} mm\n",
                                  iterations, simulated.seconds, simulation["max_displacement_mm"].get<double>())
+                  << fmt::format("phantom dataset (small preset): {} states with ground truth, landmarks, partial surfaces and "
+                                 "pictures in '{}', {:.1f} s\n",
+                                 dataset["states"].size(), (dir / "phantom").string(), dataset["timings"]["total_s"].get<double>())
                   << fmt::format("outputs in '{}' (open the .vtu files and indentation/frames.pvd in ParaView, labels.nii.gz, "
                                  "landmarks.mrk.json and indentation/displacement_field.nii.gz in 3D Slicer)\n",
                                  dir.string());

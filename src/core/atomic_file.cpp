@@ -44,4 +44,49 @@ void write_atomically(const std::filesystem::path& target,
     }
 }
 
+StagedDirectory::StagedDirectory(const std::filesystem::path& target, bool replace) : m_target(target)
+{
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    if (fs::exists(target, ec)) {
+        if (!fs::is_directory(target)) fail("output '{}' exists and is not a directory", target.string());
+        if (!fs::is_empty(target) && !replace)
+            fail("output directory '{}' exists and is not empty (choose another or allow replacing it)", target.string());
+    }
+    const fs::path parent = target.has_parent_path() ? target.parent_path() : fs::path(".");
+    if (!fs::is_directory(parent)) fail("cannot write '{}': directory '{}' does not exist", target.string(), parent.string());
+    m_path = parent / fmt::format(".{}.partial-{}", target.filename().string(), ::getpid());
+    fs::remove_all(m_path, ec);
+    fs::create_directories(m_path);
+}
+
+StagedDirectory::~StagedDirectory()
+{
+    if (m_committed) return;
+    std::error_code ec;
+    std::filesystem::remove_all(m_path, ec);
+}
+
+void StagedDirectory::commit()
+{
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    if (fs::exists(m_target, ec)) {
+        const fs::path old = m_path.string() + ".old";
+        fs::rename(m_target, old, ec);
+        if (ec) fail("cannot move the old '{}' aside: {}", m_target.string(), ec.message());
+        fs::rename(m_path, m_target, ec);
+        if (ec) {
+            std::error_code ignored;
+            fs::rename(old, m_target, ignored);
+            fail("cannot move '{}' onto '{}': {}", m_path.string(), m_target.string(), ec.message());
+        }
+        fs::remove_all(old, ec);
+    } else {
+        fs::rename(m_path, m_target, ec);
+        if (ec) fail("cannot move '{}' onto '{}': {}", m_path.string(), m_target.string(), ec.message());
+    }
+    m_committed = true;
+}
+
 } // namespace physreg

@@ -14,8 +14,11 @@
 #include <itkMetaImageIOFactory.h>
 #include <itkNiftiImageIOFactory.h>
 #include <itkNrrdImageIOFactory.h>
+#include <itkPNGImageIO.h>
+#include <itkRGBPixel.h>
 #include <itkVector.h>
 
+#include <algorithm>
 #include <filesystem>
 
 namespace physreg::detail {
@@ -224,6 +227,48 @@ void itk_write_vectors(const std::string& path, const std::string& final_name, c
     for (std::size_t i = 0; i < n; ++i)
         for (int c = 0; c < 3; ++c) data[i][c] = values[3 * i + c];
     write_itk(path, final_name, image.GetPointer());
+}
+
+using RgbImage2 = itk::Image<itk::RGBPixel<unsigned char>, 2>;
+
+void itk_write_rgb_png(const std::string& path, const std::string& final_name, int width, int height,
+                       const std::uint8_t* rgb)
+{
+    auto image = RgbImage2::New();
+    RgbImage2::RegionType region;
+    region.SetSize(0, static_cast<itk::SizeValueType>(width));
+    region.SetSize(1, static_cast<itk::SizeValueType>(height));
+    image->SetRegions(region);
+    image->Allocate();
+    std::copy(rgb, rgb + 3 * static_cast<std::size_t>(width) * static_cast<std::size_t>(height),
+              reinterpret_cast<unsigned char*>(image->GetBufferPointer()));
+    try {
+        auto writer = itk::ImageFileWriter<RgbImage2>::New();
+        writer->SetImageIO(itk::PNGImageIO::New());
+        writer->SetFileName(path);
+        writer->SetInput(image);
+        writer->Update();
+    } catch (const itk::ExceptionObject& e) {
+        fail("PNG '{}': cannot be written: {}", final_name, e.GetDescription());
+    }
+}
+
+void itk_read_rgb_png(const std::string& path, int& width, int& height, std::vector<std::uint8_t>& rgb)
+{
+    if (!fs::exists(path)) fail("PNG '{}': file does not exist", path);
+    try {
+        auto reader = itk::ImageFileReader<RgbImage2>::New();
+        reader->SetImageIO(itk::PNGImageIO::New());
+        reader->SetFileName(path);
+        reader->Update();
+        const auto size = reader->GetOutput()->GetLargestPossibleRegion().GetSize();
+        width = static_cast<int>(size[0]);
+        height = static_cast<int>(size[1]);
+        const auto* data = reinterpret_cast<const std::uint8_t*>(reader->GetOutput()->GetBufferPointer());
+        rgb.assign(data, data + 3 * size[0] * size[1]);
+    } catch (const itk::ExceptionObject& e) {
+        fail("PNG '{}': cannot be read (corrupt or truncated?): {}", path, e.GetDescription());
+    }
 }
 
 } // namespace physreg::detail

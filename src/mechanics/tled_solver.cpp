@@ -312,10 +312,19 @@ bool TledSolver<Real>::push_node_out(const Indenter& indenter, Real* u, std::int
 template <typename Real>
 void TledSolver<Real>::check_state(const Real* u, const char* phase) const
 {
-    if (m_inverted_element >= 0)
-        fail("{} step {}: element {} is inverted (det F ≤ 0); the load is too large for this mesh, or the run "
-             "is unstable (reduce the time step or the load)",
-             phase, m_steps, m_inverted_element);
+    if (m_inverted_element >= 0) {
+        // Where: the element's centre in the reference configuration, mm.
+        Vec3 centre = Vec3::Zero();
+        const int per = m_model.nodes_per_element();
+        const auto& rest = m_model.rest_positions();
+        for (int a = 0; a < per; ++a) {
+            const auto n = static_cast<std::size_t>(m_model.connectivity()[static_cast<std::size_t>(m_inverted_element) * per + a]);
+            centre += Vec3(rest[3 * n], rest[3 * n + 1], rest[3 * n + 2]) / per;
+        }
+        fail("{} step {}: element {} (at {:.1f}, {:.1f}, {:.1f} mm) is inverted (det F ≤ 0); the load is too large for "
+             "this mesh, or the run is unstable (reduce the time step or the load)",
+             phase, m_steps, m_inverted_element, centre.x(), centre.y(), centre.z());
+    }
     const double limit = 10.0 * m_model.diagonal_mm();
     for (std::size_t k = 0; k < 3 * m_n; ++k)
         if (!std::isfinite(double(u[k])) || std::abs(double(u[k])) > limit)

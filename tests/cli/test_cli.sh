@@ -33,7 +33,7 @@ expect_no_file() {
 expect_ok "--version" "$physreg" --version
 grep -q "physreg 0" "$work/out.txt" && pass || failed "--version prints the version"
 expect_ok "--help" "$physreg" --help
-for sub in mesh coarsen info convert demo "landmarks locate"; do
+for sub in mesh coarsen info convert demo phantom "landmarks locate"; do
   expect_ok "$sub --help" "$physreg" $sub --help
 done
 
@@ -124,6 +124,32 @@ expect_error "simulate: crushing load" "inverted" "$physreg" simulate "$work/bad
 [ -z "$(ls -A "$work/bad3" 2>/dev/null)" ] && pass || failed "no outputs after an inverted run"
 sed 's/face: y_max/nodes: [0, 99999999]/; s/, tolerance_mm: 3//; s/directory: sim/directory: bad4/' "$work/push.yaml" > "$work/bad4.yaml"
 expect_error "simulate: missing nodes" "does not exist" "$physreg" simulate "$work/bad4.yaml"
+
+# physreg phantom: the small preset, its manifest, bad input leaving nothing behind.
+expect_ok "phantom small" "$physreg" --log-level warn phantom --preset small --seed 3 -o "$work/ph" --json
+grep -q '"format": "physreg-phantom-dataset"' "$work/out.txt" && pass || failed "phantom --json prints the manifest"
+for f in manifest.json tissues.yaml rest/labels.nii.gz rest/intensity.nii.gz rest/landmarks.csv rest/slices.png \
+         states/A/displacement.nii.gz states/A/inverse_displacement.nii.gz states/A/mesh.vtu states/A/partial_surface_050.ply \
+         states/insufflation/labels.nii.gz; do
+  expect_file "$work/ph/$f"
+done
+expect_ok "info reads a phantom image" "$physreg" info "$work/ph/states/B/labels.nii.gz"
+expect_error "phantom: existing output" "not empty" "$physreg" phantom --preset small -o "$work/ph"
+expect_ok "phantom: --force replaces" "$physreg" --log-level warn phantom --preset small --seed 3 -o "$work/ph" --force
+expect_error "phantom: unknown preset" "unknown preset 'liver9'" "$physreg" phantom --preset liver9 -o "$work/ph_bad1"
+expect_no_file "$work/ph_bad1"
+expect_error "phantom: compression outside the body" "outside the body" "$physreg" phantom --preset small --compression X:400:0:5 -o "$work/ph_bad2"
+expect_no_file "$work/ph_bad2"
+expect_error "phantom: unknown material set" "unknown material set" "$physreg" phantom --preset small --materials rubber -o "$work/ph_bad3"
+"$physreg" mesh --help >/dev/null
+printf 'x' > "$work/not_an_image.nii.gz"
+expect_error "phantom: corrupt label map" "not_an_image.nii.gz" "$physreg" phantom --from-labels "$work/not_an_image.nii.gz" -o "$work/ph_bad4"
+expect_no_file "$work/ph_bad4"
+expect_error "phantom: no liver label" "no liver label" "$physreg" phantom --from-labels "$work/ph/rest/labels.nii.gz" --label-roles "liver=9" -o "$work/ph_bad5"
+expect_no_file "$work/ph_bad5"
+expect_error "phantom: inverting depth" "inverted" "$physreg" phantom --preset small --tool-radius 2 --depths 45 -o "$work/ph_bad6"
+expect_no_file "$work/ph_bad6"
+ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
 
 echo "$passes passed, $failures failed"
 [ "$failures" -eq 0 ]

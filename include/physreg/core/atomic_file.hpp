@@ -16,4 +16,22 @@ void write_atomically(const std::filesystem::path& target,
 // Lower-case extension with compression suffix kept: "a/b.nii.gz" -> ".nii.gz", "x.mrk.json" -> ".mrk.json".
 std::string full_extension(const std::filesystem::path& path);
 
+/// A folder of outputs that appears whole or not at all: written under a hidden sibling
+/// (".NAME.partial-PID"), renamed onto `target` by commit(), removed if destroyed before. An
+/// existing non-empty `target` is refused at construction unless `replace` is set (then it is
+/// replaced at commit).
+class StagedDirectory {
+public:
+    StagedDirectory(const std::filesystem::path& target, bool replace);
+    ~StagedDirectory();
+    StagedDirectory(const StagedDirectory&) = delete;
+    StagedDirectory& operator=(const StagedDirectory&) = delete;
+    const std::filesystem::path& path() const { return m_path; }
+    void commit();
+
+private:
+    std::filesystem::path m_target, m_path;
+    bool m_committed = false;
+};
+
 } // namespace physreg

@@ -34,4 +34,9 @@ void itk_write(const std::string& path, const std::string& final_name, const Pla
 void itk_write_vectors(const std::string& path, const std::string& final_name, const PlainGeometry& geometry,
                        const float* values);
 
+/// 8-bit RGB PNG, rows top to bottom, 3 bytes per pixel.
+void itk_write_rgb_png(const std::string& path, const std::string& final_name, int width, int height,
+                       const std::uint8_t* rgb);
+void itk_read_rgb_png(const std::string& path, int& width, int& height, std::vector<std::uint8_t>& rgb);
+
 } // namespace physreg::detail

@@ -7,6 +7,8 @@
 #include "physreg/mesh/label_grid.hpp"
 #include "physreg/mesh/quality.hpp"
 #include "physreg/mesh/tet_split.hpp"
+#include "physreg/io/landmarks_io.hpp"
+#include "physreg/phantom/dataset.hpp"
 #include "test_support.hpp"
 
 namespace physreg {
@@ -89,6 +91,58 @@ TEST(DataDigitalTwin, PatientLiverSurfaceReads)
     PHYSREG_REQUIRE_SHARED_DATA("digitaltwin-liver-portal-centerlines");
     const SurfaceMesh liver = read_surface(shared_data / "patient3_liver.stl");
     EXPECT_GT(liver.triangles.size(), 1000u);
+}
+
+} // namespace physreg
+
+// physreg phantom --from-labels on the real label maps (issue 4): the real phantom's CT labels and
+// a patient's liver + vessel masks, with a coarse ground truth so the test stays short.
+namespace physreg {
+
+void check_from_labels_dataset(const std::filesystem::path& root)
+{
+    const PhantomDataset d = read_phantom_dataset(root);
+    ASSERT_EQ(d.states.size(), 7u);
+    const LabelVolume rest = read_label_volume(d.path(d.state("rest").files.at("labels")));
+    for (const auto& s : d.states) {
+        SCOPED_TRACE(s.name);
+        const auto landmarks = read_landmarks(d.path(s.files.at("landmarks")));
+        ASSERT_EQ(landmarks.size(), 25u);
+        EXPECT_EQ(std::count_if(landmarks.begin(), landmarks.end(), [](const Landmark& l) { return l.type == LandmarkType::surface; }), 11);
+        const LabelVolume labels = read_label_volume(d.path(s.files.at("labels")));
+        EXPECT_EQ(labels.geometry.size, rest.geometry.size);
+        if (s.kind == "rest") continue;
+        EXPECT_GT(s.max_displacement_mm, 0.5);
+        EXPECT_EQ(read_displacement_field(d.path(s.files.at("displacement"))).geometry.size, rest.geometry.size);
+    }
+}
+
+TEST(DataPhantomFromLabels, RealPhantomCtLabels)
+{
+    PHYSREG_REQUIRE_SHARED_DATA("cirs057a-ct");
+    PhantomSpec spec = PhantomSpec::preset_spec("small");
+    spec.preset = "from-labels";
+    spec.labels_file = shared_data / "labels.nii.gz"; // 0 air, 1 body, 2 liver, 3 lesions, 4 vessels, 5 bone, 6 kidneys
+    spec.ground_truth_grid = {36, 27, 12};
+    test::TempDir dir;
+    generate_phantom_dataset(spec, dir / "ds", false, {});
+    check_from_labels_dataset(dir / "ds");
+}
+
+TEST(DataPhantomFromLabels, PatientLiverAndVesselMasks)
+{
+    PHYSREG_REQUIRE_SHARED_DATA("msd-hepaticvessel-liver-vessel-masks");
+    PhantomSpec spec = PhantomSpec::preset_spec("small");
+    spec.preset = "from-labels";
+    spec.labels_file = shared_data / "hepaticvessel_008_liver.nii.gz";
+    spec.vessel_mask = shared_data / "hepaticvessel_008_vsnet.nii.gz";
+    spec.roles = parse_label_roles("liver=1", "test");
+    spec.ground_truth_grid = {36, 27, 12};
+    test::TempDir dir;
+    generate_phantom_dataset(spec, dir / "ds", false, {});
+    check_from_labels_dataset(dir / "ds");
+    const PhantomDataset d = read_phantom_dataset(dir / "ds");
+    EXPECT_EQ(d.roles.vessel.size(), 1u); // the mask became a vessel label
 }
 
 } // namespace physreg

@@ -1,0 +1,60 @@
+#pragma once
+// The built-in CIRS-057A-like abdominal phantom (paper 000's test object), and what turns any
+// label map into an experiment: which labels are which organ, and an MR-like intensity image.
+//
+// Labels follow the segmented CT of the real phantom in ../shared/data/cirs057a-ct: 0 air,
+// 1 body (gel, skin), 2 liver parenchyma, 3 lesions, 4 vessels, 5 bone, 6 kidneys.
+// Coordinates are physical mm in LPS: x towards the patient's left, y posterior, z superior; the
+// phantom lies supine with its flat base at the posterior side, so tools press along +y.
+#include "physreg/image/image_geometry.hpp"
+
+#include <cstdint>
+#include <set>
+#include <string>
+
+namespace physreg {
+
+namespace phantom_label {
+constexpr std::uint16_t body = 1, liver = 2, lesion = 3, vessel = 4, bone = 5, kidney = 6;
+} // namespace phantom_label
+
+/// Which label values of a label map play which anatomical role. The liver is parenchyma +
+/// lesions + vessels; at least one parenchyma label must be present.
+struct LabelRoles {
+    std::set<std::int32_t> body, liver, lesion, vessel, bone, kidney;
+    bool is_liver_tissue(std::int32_t label) const { return liver.count(label) || lesion.count(label) || vessel.count(label); }
+    std::string role_of(std::int32_t label) const; ///< "liver", …, or "" for none
+    void validate(const std::string& what) const;  ///< a label in two roles, label 0, no liver label
+};
+
+/// The phantom's convention (labels 1…6 above).
+LabelRoles phantom_label_roles();
+/// "liver=2;lesion=3;vessel=4,7" → roles (unnamed roles stay empty); throws Error naming `option`.
+LabelRoles parse_label_roles(const std::string& text, const std::string& option);
+
+/// Measured facts of the CIRS 057A phantom: body ≈ 270 × 200 mm in cross-section, 130 mm long,
+/// on a flat base; liver ≈ 184 × 142 × 89 mm (LR × AP × SI) of three smooth lobes with an
+/// umbilical-notch-like cleft; lesions of 14, 14, 9, 8, 5 and 5 mm; a branching vessel tree with
+/// radii decreasing from 4.5 to 1.2 mm (longest tube path ≈ 135 mm); spine and two kidneys.
+/// Deterministic. `voxel_mm`: isotropic voxel size, 0.5 … 6 mm.
+LabelVolume make_cirs057a_phantom(double voxel_mm);
+
+/// MR-like (T2-weighted look) intensities: per-role means (vessels dark, lesions bright), a
+/// smooth multiplicative bias field (±15 %) and Rician noise (σ = 2 % of the liver's mean), all
+/// drawn from `seed`. Arbitrary units.
+ScalarImage synthesize_mr_intensity(const LabelVolume& labels, const LabelRoles& roles, std::uint64_t seed);
+
+/// A portable seeded random stream (SplitMix64 + Box–Muller): identical on every platform.
+class SeededRandom {
+public:
+    explicit SeededRandom(std::uint64_t seed) : m_state(seed) {}
+    std::uint64_t next();
+    double uniform();  ///< [0, 1)
+    double normal();   ///< N(0, 1)
+private:
+    std::uint64_t m_state;
+    double m_spare = 0.0;
+    bool m_has_spare = false;
+};
+
+} // namespace physreg

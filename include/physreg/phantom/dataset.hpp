@@ -1,0 +1,131 @@
+#pragma once
+// `physreg phantom`: an experiment dataset built from the built-in CIRS-057A-like phantom or any
+// label map — the shared test bed of every registration method in physreg. From the rest labels it
+// makes an MR-like image, 25 landmarks, tool compressions A–E and an insufflation-like pressure,
+// each solved to equilibrium on a finer ground-truth model (tissues sharing nodes, TLED
+// Neo-Hookean, indenter contact), with deformed images, ITK displacement fields, VTU meshes,
+// partial intra-operative surfaces, segmentation pairs, pictures and a JSON manifest.
+#include "physreg/core/types.hpp"
+#include "physreg/mechanics/loads.hpp"
+#include "physreg/mechanics/tled_solver.hpp"
+#include "physreg/model/tissue_table.hpp"
+#include "physreg/phantom/abdominal_phantom.hpp"
+
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace physreg {
+
+/// paper000: parenchyma 2e5, vessel 1e6, lesion 5e6 Pa, ν 0.49. healthy / cirrhotic (paper 001):
+/// parenchyma 3.5 kPa / 30 kPa, ν 0.45; vessels 620 kPa, ν 0.4; lesions 10× the parenchyma (our
+/// assumption: paper 001 has none). Kidneys (our assumption): 2.5× the parenchyma, same ν.
+enum class MaterialSet { paper000, healthy, cirrhotic };
+MaterialSet parse_material_set(const std::string& text);
+std::string to_string(MaterialSet set);
+/// The mechanical model's tissues: every liver role label and the kidneys present in `labels`;
+/// every other label is ignored (not meshed). Names: parenchyma, lesion, vessel, kidney.
+TissueTable phantom_tissue_table(MaterialSet set, const LabelRoles& roles, const std::set<std::int32_t>& present_labels);
+
+struct ToolSpec {
+    IndenterShape shape = IndenterShape::sphere; ///< sphere, cylinder (a rod pressed sideways) or box
+    double radius_mm = 12.5;                     ///< sphere, cylinder
+    Vec3 axis = Vec3::UnitX();                   ///< cylinder axis (⟂ to the pressing direction)
+    Vec3 half_extents_mm = Vec3(12, 6, 12);      ///< box, in LPS axes
+};
+
+struct CompressionSpec {
+    std::string name;
+    double x_mm = 0.0, z_mm = 0.0;       ///< where the tool enters: the line x = x_mm, z = z_mm (LPS)
+    Vec3 direction = Vec3::UnitY();      ///< pressing direction (default posterior, +y)
+    double depth_mm = 10.0;              ///< travel beyond first contact with an organ
+    ToolSpec tool;
+};
+
+struct PhantomSpec {
+    std::string preset = "cirs057a";          ///< cirs057a, small (tests) or from-labels
+    std::filesystem::path labels_file;        ///< from-labels: the label map
+    LabelRoles roles = phantom_label_roles(); ///< from-labels: which label is which organ
+    std::filesystem::path vessel_mask;        ///< optional: nonzero voxels inside the liver become vessel
+    double voxel_mm = 1.0;                    ///< preset image resolution
+    Index3 ground_truth_grid{148, 108, 36};   ///< cells over the liver's bounding box (capped at the image's voxels)
+    std::uint64_t seed = 1;
+    MaterialSet materials = MaterialSet::paper000;
+    /// Five positions over the liver when empty; depths (mm) used for them, in order A, B, ….
+    std::vector<CompressionSpec> compressions;
+    std::vector<double> depths_mm{10, 12, 10, 8, 10};
+    ToolSpec tool;
+    std::optional<double> insufflation_pa;    ///< default: 3 % of the parenchyma's Young's modulus; 0 disables
+    double landmark_noise_mm = 0.5;
+    double surface_noise_mm = 0.5;
+    std::vector<int> surface_percentages{50, 40, 30, 20, 10};
+    /// Largest tool travel per relaxation iteration, in smallest-cell sizes (sets the ramp length).
+    double tool_speed_per_cell = 0.01;
+    EquilibriumOptions equilibrium = tight_equilibrium();
+    bool single_precision = false;
+
+    static EquilibriumOptions tight_equilibrium();
+    /// The named preset: "cirs057a" (the default) or "small" (4 mm voxels, a coarse ground truth
+    /// and shallow compressions; for tests). Throws Error for an unknown name.
+    static PhantomSpec preset_spec(const std::string& name);
+    void validate() const;
+};
+
+/// The ground-truth solve: static equilibrium by dynamic relaxation in `load_steps` equal load
+/// increments (intermediate ones to 10× the tolerance, the last to `options`), warm-started from
+/// each other. Throws Error naming `what` on inversion, divergence or non-convergence. The
+/// penetration is the deepest `surface_nodes` node inside a tool at the end (mm).
+struct GroundTruthSolution {
+    std::vector<double> displacement_mm;
+    long iterations = 0;
+    double seconds = 0.0;
+    double max_displacement_mm = 0.0;
+    double max_node_penetration_mm = 0.0;
+};
+/// `initial_displacement_mm` (3 per node, optional) starts the relaxation from a pilot solution
+/// (e.g. of a coarser model, interpolated) instead of rest; the loads are then applied at once.
+GroundTruthSolution solve_ground_truth(const TledModel& model, const Loads& loads, const EquilibriumOptions& options, int load_steps,
+                                       bool single_precision, const std::vector<std::int32_t>& surface_nodes, const std::string& what,
+                                       const std::vector<double>* initial_displacement_mm = nullptr);
+
+/// What `physreg phantom` wrote: every path relative to the dataset folder.
+struct DatasetState {
+    std::string name;                              ///< "rest", "A"…"E", "insufflation"
+    std::string kind;                              ///< rest, compression, insufflation
+    std::map<std::string, std::string> files;      ///< role → relative path (labels, intensity, …)
+    std::map<int, std::pair<std::string, std::string>> surfaces; ///< percentage → (PLY, CSV)
+    double max_displacement_mm = 0.0;
+    double depth_mm = 0.0;                         ///< compressions
+};
+
+struct PhantomDataset {
+    std::filesystem::path directory;
+    std::string generator_version;
+    std::uint64_t seed = 0;
+    std::string preset;
+    LabelRoles roles;
+    std::string tissues_file;                      ///< relative: the ground-truth model's tissue table
+    std::vector<DatasetState> states;              ///< rest first
+    const DatasetState& state(const std::string& name) const; ///< throws Error if absent
+    std::filesystem::path path(const std::string& relative) const { return directory / relative; }
+};
+
+/// Reads DIR/manifest.json; throws Error naming the file and key for a missing or malformed
+/// manifest, an unknown format version, or a listed file that does not exist.
+PhantomDataset read_phantom_dataset(const std::filesystem::path& directory);
+
+/// Figures of a finished run, for the caller's report (no timings are written into the dataset
+/// itself, so the same seed gives identical files).
+struct DatasetReport {
+    std::string summary_json;                      ///< the manifest plus run times
+};
+
+/// Builds the dataset into `directory` (staged: it appears only when complete; an existing
+/// non-empty folder is refused unless `replace`). `progress(fraction, message)` along the way.
+DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const std::filesystem::path& directory, bool replace,
+                                       const std::function<void(double, const std::string&)>& progress);
+
+} // namespace physreg

@@ -1,0 +1,55 @@
+#pragma once
+// Paper 001's intra-operative data: the part of the deformed liver surface a laparoscopic camera
+// sees, as a noisy point cloud whose points carry anatomical feature labels (an umbilical-notch-
+// like cleft and the anterior margin, the two features paper 001 matches separately).
+#include "physreg/core/types.hpp"
+#include "physreg/mesh/volume_mesh.hpp"
+
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <vector>
+
+namespace physreg {
+
+enum SurfaceFeature : std::int32_t { feature_none = 0, feature_umbilical_notch = 1, feature_anterior_margin = 2 };
+
+/// The outer boundary of a volume mesh as triangles over the mesh's own node ids (so any nodal
+/// displacement deforms it), with outward orientation.
+struct BoundarySurface {
+    std::vector<std::array<std::int32_t, 3>> triangles; ///< volume-mesh node ids
+    std::vector<std::int32_t> nodes;                    ///< the boundary's node ids, sorted
+    std::vector<std::int32_t> node_feature;             ///< per entry of `nodes`: SurfaceFeature
+};
+
+/// Boundary triangles of `mesh` restricted to cells whose label satisfies `keep` (e.g. the liver,
+/// not the kidneys), and feature labels from the rest shape: the anterior margin is where the
+/// outward normal lies within 35° of anterior-inferior (0, −1, −1)/√2; the notch is the part of
+/// that band and of the inferior surface within 10 mm (in x) of `notch_x_mm`.
+BoundarySurface liver_boundary(const VolumeMesh& mesh, const std::function<bool(std::int32_t)>& keep,
+                               std::optional<double> notch_x_mm);
+
+struct LabelledPointCloud {
+    std::vector<Vec3> points;          ///< mm, LPS
+    std::vector<Vec3> normals;         ///< unit, outward (from the deformed surface, before noise)
+    std::vector<std::int32_t> labels;  ///< SurfaceFeature
+};
+
+/// The visible patch: of the triangles facing the camera (deformed normal · view < −0.2, `view`
+/// the camera's viewing direction, e.g. +y for a camera above an anterior surface), those whose
+/// centroids are nearest, in the image plane, to the centroid of that anterior surface, until
+/// `fraction` of its area is kept. Their nodes, displaced by isotropic Gaussian noise of
+/// `noise_mm` (seeded), form the cloud.
+LabelledPointCloud visible_surface_patch(const VolumeMesh& mesh, const std::vector<double>& displacement_mm,
+                                         const BoundarySurface& boundary, double fraction, const Vec3& view,
+                                         double noise_mm, std::uint64_t seed);
+
+/// PLY (ascii: x y z nx ny nz label) and CSV (x_mm,y_mm,z_mm,label) writers, atomic.
+void write_point_cloud_ply(const std::filesystem::path& path, const LabelledPointCloud& cloud);
+void write_point_cloud_csv(const std::filesystem::path& path, const LabelledPointCloud& cloud);
+LabelledPointCloud read_point_cloud_csv(const std::filesystem::path& path);
+/// The labelled boundary as a PLY mesh (vertices with a "feature" property), atomic.
+void write_boundary_ply(const std::filesystem::path& path, const VolumeMesh& mesh, const std::vector<double>& displacement_mm,
+                        const BoundarySurface& boundary);
+
+} // namespace physreg
