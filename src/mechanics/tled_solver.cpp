@@ -571,8 +571,9 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
         summary.residual_n = residual;
         summary.reference_force_n = reference;
         summary.estimated_error_mm = increment == 0.0 ? 0.0 : estimate;
-        const bool still = increment == 0.0 || estimate <= options.displacement_tolerance_mm;
-        const bool balanced = residual <= options.residual_tolerance * std::max(reference, 1e-30);
+        // Floors at round-off level: an unloaded model (all forces ~1e-15 N) is at equilibrium.
+        const bool still = increment <= 1e-9 || estimate <= options.displacement_tolerance_mm;
+        const bool balanced = residual <= std::max(options.residual_tolerance * reference, 1e-10);
         if (progress && iteration % 200 == 0) progress(-1.0, iteration);
         if (still && balanced && iteration > ramp) {
             summary.status = SolveStatus::converged;

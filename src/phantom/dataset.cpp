@@ -93,9 +93,9 @@ PhantomSpec PhantomSpec::preset_spec(const std::string& name)
     if (name == "cirs057a") return spec;
     if (name == "small") {
         spec.voxel_mm = 4.0;
-        spec.ground_truth_grid = {24, 18, 8};
-        spec.depths_mm = {6, 8, 10, 5, 7};
-        spec.tool.radius_mm = 10.0;
+        spec.ground_truth_grid = {37, 27, 12};
+        spec.depths_mm = {6, 8, 6, 5, 6};
+        spec.tool.radius_mm = 12.0;
         spec.surface_percentages = {50, 10};
         spec.equilibrium.displacement_tolerance_mm = 1e-3;
         return spec;
@@ -271,6 +271,7 @@ GroundTruth build_ground_truth(const Prepared& p, const PhantomSpec& spec)
         dims[a] = std::clamp<std::int64_t>(std::llround(static_cast<double>(organ_voxels) / voxels_per_cell), 1, organ_voxels);
     }
     build_model(gt, p, dims);
+    if (gt.mesh.cell_count() <= 20000) return gt; // small enough to relax directly from rest
     gt.pilot = std::make_unique<GroundTruth>();
     gt.pilot->tissues = gt.tissues;
     Index3 pilot_dims;
@@ -473,6 +474,19 @@ Loads supported(const GroundTruth& m)
 SolvedState solve_state(const GroundTruth& gt, const PhantomSpec& spec, const LoadMaker& pilot_loads, long pilot_ramp,
                         const LoadMaker& fine_loads, long fine_ramp, const std::string& what)
 {
+    if (!gt.pilot) { // a small model: `pilot_loads` on the fine model, from rest
+        EquilibriumOptions options = spec.equilibrium;
+        options.ramp_iterations = pilot_ramp;
+        const GroundTruthSolution solution =
+            solve_ground_truth(*gt.model, pilot_loads(gt), options, 1, spec.single_precision, gt.boundary_nodes, what);
+        SolvedState s;
+        s.u = solution.displacement_mm;
+        s.iterations = solution.iterations;
+        s.seconds = solution.seconds;
+        s.max_displacement_mm = solution.max_displacement_mm;
+        s.max_penetration_mm = solution.max_node_penetration_mm;
+        return s;
+    }
     EquilibriumOptions pilot_options = spec.equilibrium;
     pilot_options.displacement_tolerance_mm *= 4.0;
     pilot_options.ramp_iterations = pilot_ramp;
@@ -542,6 +556,40 @@ SolvedState solve_compression(const GroundTruth& gt, const PhantomSpec& spec, co
     const Vec3 start = centre_line - length * d;
     if (!line_hits(p.labels, start, d, 2 * length, [](std::int32_t l) { return l != 0; }))
         fail("compression {}: the tool line x = {:.1f} mm, z = {:.1f} mm misses the phantom's body (outside the body)", c.name, c.x_mm, c.z_mm);
+    {
+        // The tissue the tool presses on: organ voxels along its line. A depth near that thickness
+        // would drive the tool through the organ.
+        const double step = 0.5 * g.spacing.minCoeff();
+        double first_t = -1, last_t = -1;
+        for (double t = 0; t <= 2 * length; t += step) {
+            const Vec3 index = g.physical_to_index(start + t * d);
+            std::int64_t ijk[3];
+            bool inside = true;
+            for (int k = 0; k < 3; ++k) {
+                ijk[k] = std::lround(index[k]);
+                inside &= ijk[k] >= 0 && ijk[k] < g.size[k];
+            }
+            if (inside && gt.tissues.find(p.labels.at(ijk[0], ijk[1], ijk[2]))) {
+                if (first_t < 0) first_t = t;
+                last_t = t;
+            }
+        }
+        const double thickness = first_t < 0 ? 0.0 : last_t - first_t;
+        if (first_t >= 0 && c.depth_mm > 0.6 * thickness)
+            fail("compression {}: depth {:.1f} mm exceeds 60 % of the organs' thickness along the tool's line ({:.1f} mm at x = {:.1f}, "
+                 "z = {:.1f} mm)", c.name, c.depth_mm, thickness, c.x_mm, c.z_mm);
+    }
+    const GroundTruth& first = gt.pilot ? *gt.pilot : gt; // the model the tool meets first
+    // A sphere slips through a cell face whose half-diagonal exceeds its radius.
+    double across_squared = 0.0;
+    for (int k = 0; k < 3; ++k)
+        if (std::abs(d[k]) < 0.9) across_squared += first.cell_size[k] * first.cell_size[k];
+    const double across = std::sqrt(across_squared);
+    const double width = c.tool.shape == IndenterShape::box ? 2.0 * c.tool.half_extents_mm.minCoeff() : 2.0 * c.tool.radius_mm;
+    if (width < across)
+        fail("compression {}: the tool ({:.1f} mm across) is narrower than the ground-truth cells across the pressing direction "
+             "({:.1f} mm); node-to-surface contact would let it slip between nodes — use a larger --tool-radius or a finer "
+             "--ground-truth-grid", c.name, width, across);
     const double reach = c.tool.shape == IndenterShape::box ? c.tool.half_extents_mm.norm() : c.tool.radius_mm;
     Indenter probe = make_indenter(c, start, start + 3 * length * d);
     probe.validate();
@@ -575,7 +623,7 @@ SolvedState solve_compression(const GroundTruth& gt, const PhantomSpec& spec, co
     // elements under it; the smooth ramp peaks at 1.875× its mean speed. The pilot's tool starts two
     // of its cells back (its coarser surface may stand proud of the fine one); the fine model starts
     // from the pilot's shape with its tool two pilot cells back, then pressed home.
-    const double pilot_h = gt.pilot->cell_size.minCoeff(), back = 2.0 * gt.pilot->cell_size.maxCoeff();
+    const double pilot_h = first.cell_size.minCoeff(), back = 2.0 * first.cell_size.maxCoeff();
     auto ramp = [&](double travel, double h) {
         return std::max<long>(spec.equilibrium.ramp_iterations, std::lround(std::ceil(1.875 * travel / (spec.tool_speed_per_cell * h))));
     };
@@ -592,6 +640,21 @@ SolvedState solve_compression(const GroundTruth& gt, const PhantomSpec& spec, co
     SolvedState s = solve_state(gt, spec, pilot_loads, ramp(c.depth_mm + back, pilot_h), fine_loads,
                                 ramp(back, gt.cell_size.minCoeff()), "compression " + c.name);
     s.tool = make_indenter(c, contact, end);
+    // Node-to-surface contact holds nodes, not faces: a tool too small for the cells can slip between
+    // surface nodes into the tissue. Then deformed cell centres end up inside the tool.
+    for (std::size_t e = 0; e < gt.mesh.cell_count(); ++e) {
+        Vec3 centre = Vec3::Zero();
+        for (const auto n : gt.mesh.cell(e)) {
+            const auto q = 3 * static_cast<std::size_t>(n);
+            centre += (gt.mesh.nodes[static_cast<std::size_t>(n)] + Vec3(s.u[q], s.u[q + 1], s.u[q + 2])) / gt.mesh.cell_size();
+        }
+        Vec3 surface, normal;
+        // Cells wrapped around the tool have their centres inside it by the chord sag; a slipped tool
+        // swallows whole cells.
+        if (s.tool->push_out(centre, 1.0, surface, normal) && (surface - centre).norm() > 0.5 * gt.cell_size.minCoeff())
+            fail("compression {}: the tool slipped past the surface nodes into the tissue (element {} ends inside it; use a larger "
+                 "tool or a finer ground-truth grid)", c.name, e);
+    }
     s.compression = c;
     return s;
 }
@@ -792,7 +855,7 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
         {"nodes", gt.mesh.node_count()},
         {"elements", gt.mesh.cell_count()},
         {"fixed_nodes", gt.fixed_nodes.size()},
-        {"pilot_grid_dims", json::array({gt.pilot->mesh.grid->dims[0], gt.pilot->mesh.grid->dims[1], gt.pilot->mesh.grid->dims[2]})},
+        {"pilot_grid_dims", gt.pilot ? json::array({gt.pilot->mesh.grid->dims[0], gt.pilot->mesh.grid->dims[1], gt.pilot->mesh.grid->dims[2]}) : json()},
         {"support", "organ surface faces facing posterior (outward normal y > 0.5) are fixed"},
         {"precision", spec.single_precision ? "float" : "double"},
         {"equilibrium", {{"displacement_tolerance_mm", spec.equilibrium.displacement_tolerance_mm},

@@ -147,7 +147,9 @@ expect_error "phantom: corrupt label map" "not_an_image.nii.gz" "$physreg" phant
 expect_no_file "$work/ph_bad4"
 expect_error "phantom: no liver label" "no liver label" "$physreg" phantom --from-labels "$work/ph/rest/labels.nii.gz" --label-roles "liver=9" -o "$work/ph_bad5"
 expect_no_file "$work/ph_bad5"
-expect_error "phantom: inverting depth" "inverted" "$physreg" phantom --preset small --tool-radius 2 --depths 45 -o "$work/ph_bad6"
+expect_error "phantom: depth beyond the organ" "exceeds 60 % of the organs' thickness" "$physreg" phantom --preset small --compression L:60:8:40 -o "$work/ph_bad6"
+expect_no_file "$work/ph_bad6"
+expect_error "phantom: tool narrower than the cells" "narrower than the ground-truth cells" "$physreg" phantom --preset small --tool-radius 2 -o "$work/ph_bad6"
 expect_no_file "$work/ph_bad6"
 ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
 

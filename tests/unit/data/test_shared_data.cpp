@@ -137,7 +137,7 @@ TEST(DataPhantomFromLabels, PatientLiverAndVesselMasks)
     spec.labels_file = shared_data / "hepaticvessel_008_liver.nii.gz";
     spec.vessel_mask = shared_data / "hepaticvessel_008_vsnet.nii.gz";
     spec.roles = parse_label_roles("liver=1", "test");
-    spec.ground_truth_grid = {36, 27, 12};
+    spec.ground_truth_grid = {48, 40, 24};
     test::TempDir dir;
     generate_phantom_dataset(spec, dir / "ds", false, {});
     check_from_labels_dataset(dir / "ds");

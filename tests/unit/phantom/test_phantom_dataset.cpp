@@ -164,7 +164,8 @@ TEST_F(PhantomSmall, GroundTruthIsZeroOnTheSupportAndTheToolDoesNotPenetrate)
         MeshData data;
         const VolumeMesh mesh = read_vtu(d.path(s.files.at("mesh")), &data);
         const auto& u = data.find_point("displacement")->values;
-        // The tool of the small preset: a 10 mm sphere; its final centre from the manifest.
+        // The tool of the small preset: a sphere; its final centre from the manifest.
+        const double r = PhantomSpec::preset_spec("small").tool.radius_mm;
         const auto key = "\"name\": \"" + s.name + "\"";
         const auto at = manifest.find(key);
         ASSERT_NE(at, std::string::npos);
@@ -178,17 +179,17 @@ TEST_F(PhantomSmall, GroundTruthIsZeroOnTheSupportAndTheToolDoesNotPenetrate)
         for (const auto& f : match_faces(mesh))
             if (f.neighbour < 0)
                 for (int a = 0; a < f.node_count(); ++a) boundary[static_cast<std::size_t>(f.nodes[a])] = 1;
-        const double h = mesh.grid->cell_size.maxCoeff(), sag = h * h / (8 * 10.0);
+        const double h = mesh.grid->cell_size.maxCoeff(), sag = h * h / (8 * r);
         double deepest = 0.0, deepest_interior = 0.0, closest = 1e9;
         for (std::size_t n = 0; n < mesh.node_count(); ++n) {
             const Vec3 x = mesh.nodes[n] + Vec3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
             const double distance = (x - centre).norm();
-            (boundary[n] ? deepest : deepest_interior) = std::max(boundary[n] ? deepest : deepest_interior, 10.0 - distance);
+            (boundary[n] ? deepest : deepest_interior) = std::max(boundary[n] ? deepest : deepest_interior, r - distance);
             if (boundary[n]) closest = std::min(closest, distance);
         }
         EXPECT_LE(deepest, 1e-6) << s.name << ": a surface node is inside the tool";
         EXPECT_LE(deepest_interior, sag) << s.name << ": the surface cuts the tool deeper than the contact tolerance";
-        EXPECT_NEAR(closest, 10.0, 1e-6) << s.name << ": the tool touches the deformed surface";
+        EXPECT_NEAR(closest, r, 1e-6) << s.name << ": the tool touches the deformed surface";
     }
 }
 
@@ -242,13 +243,29 @@ TEST(PhantomDataset, BadInputIsRefusedAndLeavesNothing)
     const std::string outside_message = test::error_message([&] { generate_phantom_dataset(outside, dir / "out2", false, {}); });
     EXPECT_NE(outside_message.find("outside the body"), std::string::npos) << outside_message;
     EXPECT_FALSE(fs::exists(dir / "out2"));
-    // A depth that inverts elements: a 3 mm needle-like sphere pushed 40 mm.
+    // A tool narrower than the cells would slip between nodes.
+    PhantomSpec narrow = PhantomSpec::preset_spec("small");
+    narrow.tool.radius_mm = 2.0;
+    const std::string narrow_message = test::error_message([&] { generate_phantom_dataset(narrow, dir / "out4", false, {}); });
+    EXPECT_NE(narrow_message.find("narrower than the ground-truth cells"), std::string::npos) << narrow_message;
+    EXPECT_FALSE(fs::exists(dir / "out4"));
+    // A depth beyond most of the organ's thickness along the tool's line.
     PhantomSpec deep = PhantomSpec::preset_spec("small");
-    deep.tool.radius_mm = 3.0;
-    deep.depths_mm = {40};
-    deep.tool_speed_per_cell = 0.5;
+    CompressionSpec left = c;
+    left.name = "L";
+    left.x_mm = 60; // the left lobe, ≈ 48 mm thick
+    left.z_mm = 8;
+    left.depth_mm = 40;
+    deep.compressions = {left};
     const std::string deep_message = test::error_message([&] { generate_phantom_dataset(deep, dir / "out3", false, {}); });
-    EXPECT_NE(deep_message.find("ground truth for compression A"), std::string::npos) << deep_message;
+    EXPECT_NE(deep_message.find("compression L: depth 40.0 mm exceeds 60 % of the organs' thickness"), std::string::npos) << deep_message;
+    EXPECT_FALSE(fs::exists(dir / "out3"));
+    // A tool that slips between the coarse surface nodes instead of pressing.
+    deep.compressions = {};
+    deep.tool.radius_mm = 7.0;
+    deep.depths_mm = {25};
+    const std::string slipped = test::error_message([&] { generate_phantom_dataset(deep, dir / "out3", false, {}); });
+    EXPECT_NE(slipped.find("the tool slipped past the surface nodes"), std::string::npos) << slipped;
     EXPECT_FALSE(fs::exists(dir / "out3"));
     EXPECT_TRUE(dir.files().size() == 1u) << "only no_liver.nii.gz should remain"; // no staging folders left
     // An existing non-empty output is refused before any work.
