@@ -14,26 +14,6 @@
 namespace physreg::cli {
 namespace {
 
-Vec3 parse_vector(const std::string& text, const std::string& option)
-{
-    std::stringstream in(text);
-    std::string item;
-    std::vector<double> v;
-    while (std::getline(in, item, ',')) {
-        try {
-            std::size_t used = 0;
-            v.push_back(std::stod(item, &used));
-            if (used != item.size()) throw std::invalid_argument(item);
-        } catch (const std::logic_error&) {
-            fail("{}: '{}' is not a number", option, item);
-        }
-    }
-    if (v.size() != 3) fail("{}: '{}' is not three comma-separated numbers", option, text);
-    const Vec3 out(v[0], v[1], v[2]);
-    if (!out.allFinite()) fail("{}: '{}' is not finite", option, text);
-    return out;
-}
-
 std::vector<double> parse_list(const std::string& text, const std::string& option)
 {
     std::stringstream in(text);
@@ -50,6 +30,15 @@ std::vector<double> parse_list(const std::string& text, const std::string& optio
     }
     if (v.empty()) fail("{}: empty list", option);
     return v;
+}
+
+Vec3 parse_vector(const std::string& text, const std::string& option)
+{
+    const auto v = parse_list(text, option);
+    if (v.size() != 3) fail("{}: '{}' is not three comma-separated numbers", option, text);
+    const Vec3 out(v[0], v[1], v[2]);
+    if (!out.allFinite()) fail("{}: '{}' is not finite", option, text);
+    return out;
 }
 
 } // namespace

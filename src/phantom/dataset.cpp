@@ -339,21 +339,40 @@ Vec3 liver_centroid(const Prepared& p, Vec3& lo, Vec3& hi)
     return sum / n;
 }
 
-// First label along the line through (x, z) in direction d, sampled every half voxel.
+// The label of the voxel nearest to `x`, or nothing outside the image.
+std::optional<std::uint16_t> label_at(const LabelVolume& labels, const Vec3& x)
+{
+    const auto& g = labels.geometry;
+    const Vec3 index = g.physical_to_index(x);
+    std::int64_t ijk[3];
+    for (int a = 0; a < 3; ++a) {
+        ijk[a] = std::lround(index[a]);
+        if (ijk[a] < 0 || ijk[a] >= g.size[a]) return std::nullopt;
+    }
+    return labels.at(ijk[0], ijk[1], ijk[2]);
+}
+
+// Length (mm) of the segment start + t·d, t ∈ [0, length], inside voxels satisfying `predicate`.
+double length_inside(const LabelVolume& labels, const Vec3& start, const Vec3& d, double length,
+                     const std::function<bool(std::int32_t)>& predicate)
+{
+    const double step = 0.5 * labels.geometry.spacing.minCoeff();
+    double inside = 0.0;
+    for (double t = 0; t <= length; t += step) {
+        const auto label = label_at(labels, start + t * d);
+        if (label && predicate(*label)) inside += step;
+    }
+    return inside;
+}
+
+// Whether a voxel satisfying `predicate` lies on the segment start + t·d, t ∈ [0, length] (half-voxel steps).
 bool line_hits(const LabelVolume& labels, const Vec3& start, const Vec3& d, double length,
                const std::function<bool(std::int32_t)>& predicate)
 {
-    const auto& g = labels.geometry;
-    const double step = 0.5 * g.spacing.minCoeff();
+    const double step = 0.5 * labels.geometry.spacing.minCoeff();
     for (double t = 0; t <= length; t += step) {
-        const Vec3 index = g.physical_to_index(start + t * d);
-        std::int64_t ijk[3];
-        bool inside = true;
-        for (int a = 0; a < 3; ++a) {
-            ijk[a] = std::lround(index[a]);
-            inside &= ijk[a] >= 0 && ijk[a] < g.size[a];
-        }
-        if (inside && predicate(labels.at(ijk[0], ijk[1], ijk[2]))) return true;
+        const auto label = label_at(labels, start + t * d);
+        if (label && predicate(*label)) return true;
     }
     return false;
 }
@@ -373,18 +392,20 @@ std::vector<CompressionSpec> default_compressions(const Prepared& p, const Phant
         const double x0 = lo.x() + pattern[c].first * (hi.x() - lo.x()), z0 = lo.z() + pattern[c].second * (hi.z() - lo.z());
         // Nearest column (in 2 mm rings) through the liver.
         bool found = false;
-        for (double r = 0; r <= 40 && !found; r += 2)
+        for (double r = 0; r <= 60 && !found; r += 2)
             for (int a = 0; a < std::max(1, static_cast<int>(std::ceil(2 * M_PI * r / 2))) && !found; ++a) {
                 const double angle = r == 0 ? 0 : 2 * M_PI * a / std::ceil(2 * M_PI * r / 2);
                 const double x = x0 + r * std::cos(angle), z = z0 + r * std::sin(angle);
-                if (line_hits(p.labels, Vec3(x, start_y.y(), z), Vec3::UnitY(), 2 * image_length,
-                              [&](std::int32_t l) { return p.roles.is_liver_tissue(l); })) {
+                // A column through enough liver that the depth stays well inside it.
+                const double thickness = length_inside(p.labels, Vec3(x, start_y.y(), z), Vec3::UnitY(), 2 * image_length,
+                                                       [&](std::int32_t l) { return p.roles.is_liver_tissue(l); });
+                if (thickness >= std::max(30.0, 2.5 * s.depth_mm)) {
                     s.x_mm = x;
                     s.z_mm = z;
                     found = true;
                 }
             }
-        if (!found) fail("compression {}: no column through the liver near x = {:.1f}, z = {:.1f} mm", s.name, x0, z0);
+        if (!found) fail("compression {}: no column through ≥ {:.0f} mm of liver within 60 mm of x = {:.1f}, z = {:.1f} mm", s.name, std::max(30.0, 2.5 * s.depth_mm), x0, z0);
         out.push_back(s);
     }
     return out;
@@ -559,23 +580,8 @@ SolvedState solve_compression(const GroundTruth& gt, const PhantomSpec& spec, co
     {
         // The tissue the tool presses on: organ voxels along its line. A depth near that thickness
         // would drive the tool through the organ.
-        const double step = 0.5 * g.spacing.minCoeff();
-        double first_t = -1, last_t = -1;
-        for (double t = 0; t <= 2 * length; t += step) {
-            const Vec3 index = g.physical_to_index(start + t * d);
-            std::int64_t ijk[3];
-            bool inside = true;
-            for (int k = 0; k < 3; ++k) {
-                ijk[k] = std::lround(index[k]);
-                inside &= ijk[k] >= 0 && ijk[k] < g.size[k];
-            }
-            if (inside && gt.tissues.find(p.labels.at(ijk[0], ijk[1], ijk[2]))) {
-                if (first_t < 0) first_t = t;
-                last_t = t;
-            }
-        }
-        const double thickness = first_t < 0 ? 0.0 : last_t - first_t;
-        if (first_t >= 0 && c.depth_mm > 0.6 * thickness)
+        const double thickness = length_inside(p.labels, start, d, 2 * length, [&](std::int32_t l) { return gt.tissues.find(l) != nullptr; });
+        if (c.depth_mm > 0.6 * thickness)
             fail("compression {}: depth {:.1f} mm exceeds 60 % of the organs' thickness along the tool's line ({:.1f} mm at x = {:.1f}, "
                  "z = {:.1f} mm)", c.name, c.depth_mm, thickness, c.x_mm, c.z_mm);
     }
