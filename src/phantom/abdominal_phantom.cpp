@@ -37,7 +37,7 @@ bool inside_liver(const Vec3& p_body)
                                       {{-30, -35, -5}, {40, 30, 16}}, // anterior extension of the right lobe
                                       {{40, -15, 8}, {52, 24, 16}},   // left lobe
                                       {{-5, 35, -12}, {26, 34, 18}}}; // caudate / posterior part
-    static const Ellipsoid cleft{{30, -30, -6}, {6, 22, 22}};         // umbilical-notch-like cleft
+    static const Ellipsoid cleft{{58, -28, -2}, {6, 22, 22}};         // umbilical-notch-like cleft
     const Vec3 p = p_body - liver_offset;
     double sum = 0.0;
     for (const auto& e : lobes) sum += std::exp(-6.0 * (e.value(p) - 1.0));

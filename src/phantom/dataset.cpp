@@ -381,7 +381,7 @@ std::vector<CompressionSpec> default_compressions(const Prepared& p, const Phant
                                                   double image_length)
 {
     // Five positions over the liver, as fractions of its x (right→left) and z (inferior→superior) extent.
-    const std::pair<double, double> pattern[] = {{0.45, 0.5}, {0.25, 0.45}, {0.7, 0.55}, {0.4, 0.25}, {0.55, 0.75}};
+    const std::pair<double, double> pattern[] = {{0.45, 0.5}, {0.25, 0.45}, {0.62, 0.55}, {0.4, 0.25}, {0.55, 0.75}};
     std::vector<CompressionSpec> out;
     const Vec3 start_y(0, lo.y() - 0.5 * image_length, 0);
     for (int c = 0; c < 5; ++c) {
@@ -493,11 +493,11 @@ Loads supported(const GroundTruth& m)
 // ramped; its displacement, interpolated, starts the fine model, whose relaxation then only has to
 // resolve what the pilot could not (≈ 2× fewer fine iterations than a ramp on the fine model).
 SolvedState solve_state(const GroundTruth& gt, const PhantomSpec& spec, const LoadMaker& pilot_loads, long pilot_ramp,
-                        const LoadMaker& fine_loads, long fine_ramp, const std::string& what)
+                        const LoadMaker& fine_loads, long fine_ramp, long direct_ramp, const std::string& what)
 {
     if (!gt.pilot) { // a small model: `pilot_loads` on the fine model, from rest
         EquilibriumOptions options = spec.equilibrium;
-        options.ramp_iterations = pilot_ramp;
+        options.ramp_iterations = direct_ramp;
         const GroundTruthSolution solution =
             solve_ground_truth(*gt.model, pilot_loads(gt), options, 1, spec.single_precision, gt.boundary_nodes, what);
         SolvedState s;
@@ -548,8 +548,17 @@ SolvedState solve_state(const GroundTruth& gt, const PhantomSpec& spec, const Lo
                 if (c.dofs[k]) start[3 * static_cast<std::size_t>(n) + k] = 0.0; // support: exactly fixed
     EquilibriumOptions fine_options = spec.equilibrium;
     fine_options.ramp_iterations = fine_ramp;
-    const GroundTruthSolution solution =
-        solve_ground_truth(*gt.model, loads, fine_options, 1, spec.single_precision, gt.boundary_nodes, what, &start);
+    GroundTruthSolution solution;
+    try {
+        solution = solve_ground_truth(*gt.model, loads, fine_options, 1, spec.single_precision, gt.boundary_nodes, what, &start);
+    } catch (const Error& e) {
+        // Where the pilot's coarser cells cannot follow a thin feature, the interpolated start can
+        // fold a fine element; the fine model then relaxes from rest (slower, same criterion).
+        logger()->warn("{}: the pilot's shape does not fit the fine model ({}); relaxing the fine model from rest", what, e.what());
+        EquilibriumOptions options = spec.equilibrium;
+        options.ramp_iterations = direct_ramp;
+        solution = solve_ground_truth(*gt.model, pilot_loads(gt), options, 1, spec.single_precision, gt.boundary_nodes, what);
+    }
     SolvedState s;
     s.u = solution.displacement_mm;
     s.iterations = solution.iterations;
@@ -643,8 +652,8 @@ SolvedState solve_compression(const GroundTruth& gt, const PhantomSpec& spec, co
         loads.indenters.push_back(make_indenter(c, end - back * d, end));
         return loads;
     };
-    SolvedState s = solve_state(gt, spec, pilot_loads, ramp(c.depth_mm + back, pilot_h), fine_loads,
-                                ramp(back, gt.cell_size.minCoeff()), "compression " + c.name);
+    SolvedState s = solve_state(gt, spec, pilot_loads, ramp(c.depth_mm + back, pilot_h), fine_loads, ramp(back, gt.cell_size.minCoeff()),
+                                ramp(c.depth_mm + back, gt.cell_size.minCoeff()), "compression " + c.name);
     s.tool = make_indenter(c, contact, end);
     // Node-to-surface contact holds nodes, not faces: a tool too small for the cells can slip between
     // surface nodes into the tissue. Then deformed cell centres end up inside the tool.
@@ -680,7 +689,8 @@ SolvedState solve_insufflation(const GroundTruth& gt, const PhantomSpec& spec, d
         return loads;
     };
     // The fine model starts from the pilot's shape under the full pressure at once (ramp of 1).
-    SolvedState s = solve_state(gt, spec, pressure_loads, spec.equilibrium.ramp_iterations, pressure_loads, 1, "insufflation");
+    SolvedState s = solve_state(gt, spec, pressure_loads, spec.equilibrium.ramp_iterations, pressure_loads, 1,
+                                spec.equilibrium.ramp_iterations, "insufflation");
     s.pressure_pa = pressure_pa;
     return s;
 }
