@@ -479,6 +479,17 @@ GroundTruthSolution solve_with(const TledModel& model, const Loads& loads, const
     return s;
 }
 
+SolvedState solved_from(const GroundTruthSolution& solution)
+{
+    SolvedState s;
+    s.u = solution.displacement_mm;
+    s.iterations = solution.iterations;
+    s.seconds = solution.seconds;
+    s.max_displacement_mm = solution.max_displacement_mm;
+    s.max_penetration_mm = solution.max_node_penetration_mm;
+    return s;
+}
+
 // Loads of one state on a model: the posterior support plus `extra` (tools or pressure).
 using LoadMaker = std::function<Loads(const GroundTruth&)>;
 
@@ -498,15 +509,7 @@ SolvedState solve_state(const GroundTruth& gt, const PhantomSpec& spec, const Lo
     if (!gt.pilot) { // a small model: `pilot_loads` on the fine model, from rest
         EquilibriumOptions options = spec.equilibrium;
         options.ramp_iterations = direct_ramp;
-        const GroundTruthSolution solution =
-            solve_ground_truth(*gt.model, pilot_loads(gt), options, 1, spec.single_precision, gt.boundary_nodes, what);
-        SolvedState s;
-        s.u = solution.displacement_mm;
-        s.iterations = solution.iterations;
-        s.seconds = solution.seconds;
-        s.max_displacement_mm = solution.max_displacement_mm;
-        s.max_penetration_mm = solution.max_node_penetration_mm;
-        return s;
+        return solved_from(solve_ground_truth(*gt.model, pilot_loads(gt), options, 1, spec.single_precision, gt.boundary_nodes, what));
     }
     EquilibriumOptions pilot_options = spec.equilibrium;
     pilot_options.displacement_tolerance_mm *= 4.0;
@@ -559,13 +562,9 @@ SolvedState solve_state(const GroundTruth& gt, const PhantomSpec& spec, const Lo
         options.ramp_iterations = direct_ramp;
         solution = solve_ground_truth(*gt.model, pilot_loads(gt), options, 1, spec.single_precision, gt.boundary_nodes, what);
     }
-    SolvedState s;
-    s.u = solution.displacement_mm;
-    s.iterations = solution.iterations;
+    SolvedState s = solved_from(solution);
     s.pilot_iterations = pilot.iterations;
-    s.seconds = solution.seconds + pilot.seconds;
-    s.max_displacement_mm = solution.max_displacement_mm;
-    s.max_penetration_mm = solution.max_node_penetration_mm;
+    s.seconds += pilot.seconds;
     return s;
 }
 

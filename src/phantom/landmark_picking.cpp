@@ -123,6 +123,19 @@ void vessel_features(const LabelVolume& v, const std::vector<std::size_t>& voxel
     const std::int64_t nx = g.size[0], ny = g.size[1], nz = g.size[2];
     std::map<std::size_t, std::size_t> local;
     for (std::size_t q = 0; q < voxels.size(); ++q) local[voxels[q]] = q;
+    // Calls visit(neighbour, axis) for each face neighbour of component voxel q inside the component.
+    auto for_each_neighbour = [&](std::size_t q, const auto& visit) {
+        const auto s = static_cast<std::int64_t>(voxels[q]);
+        const std::int64_t i = s % nx, j = (s / nx) % ny, k = s / (nx * ny);
+        for (int a = 0; a < 3; ++a)
+            for (int d : {-1, 1}) {
+                std::int64_t n[3] = {i, j, k};
+                n[a] += d;
+                if (n[a] < 0 || n[a] >= (a == 0 ? nx : a == 1 ? ny : nz)) continue;
+                const auto it = local.find(static_cast<std::size_t>(g.linear_index(n[0], n[1], n[2])));
+                if (it != local.end()) visit(it->second, a);
+            }
+    };
     auto bfs = [&](std::size_t start, std::vector<double>& distance) {
         distance.assign(voxels.size(), -1.0);
         std::deque<std::size_t> queue{start};
@@ -130,18 +143,11 @@ void vessel_features(const LabelVolume& v, const std::vector<std::size_t>& voxel
         while (!queue.empty()) {
             const std::size_t q = queue.front();
             queue.pop_front();
-            const auto s = static_cast<std::int64_t>(voxels[q]);
-            const std::int64_t i = s % nx, j = (s / nx) % ny, k = s / (nx * ny);
-            for (int a = 0; a < 3; ++a)
-                for (int d : {-1, 1}) {
-                    std::int64_t n[3] = {i, j, k};
-                    n[a] += d;
-                    if (n[a] < 0 || n[a] >= (a == 0 ? nx : a == 1 ? ny : nz)) continue;
-                    const auto it = local.find(static_cast<std::size_t>(g.linear_index(n[0], n[1], n[2])));
-                    if (it == local.end() || distance[it->second] >= 0) continue;
-                    distance[it->second] = distance[q] + g.spacing[a];
-                    queue.push_back(it->second);
-                }
+            for_each_neighbour(q, [&](std::size_t n, int axis) {
+                if (distance[n] >= 0) return;
+                distance[n] = distance[q] + g.spacing[axis];
+                queue.push_back(n);
+            });
         }
     };
     std::vector<double> distance;
@@ -155,35 +161,17 @@ void vessel_features(const LabelVolume& v, const std::vector<std::size_t>& voxel
     for (std::size_t q = 0; q < parent.size(); ++q) parent[q] = q;
     std::function<std::size_t(std::size_t)> root = [&](std::size_t q) { return parent[q] == q ? q : parent[q] = root(parent[q]); };
     auto band = [&](std::size_t q) { return distance[q] < 0 ? -1L : static_cast<long>(distance[q] / band_mm); };
-    std::vector<std::pair<std::size_t, std::size_t>> cross; // (piece in band b, voxel in band b+1)
-    for (std::size_t q = 0; q < voxels.size(); ++q) {
-        if (distance[q] < 0) continue;
-        const auto s = static_cast<std::int64_t>(voxels[q]);
-        const std::int64_t i = s % nx, j = (s / nx) % ny, k = s / (nx * ny);
-        for (int a = 0; a < 3; ++a) {
-            std::int64_t n[3] = {i, j, k};
-            n[a] += 1;
-            if (n[a] >= (a == 0 ? nx : a == 1 ? ny : nz)) continue;
-            const auto it = local.find(static_cast<std::size_t>(g.linear_index(n[0], n[1], n[2])));
-            if (it == local.end() || distance[it->second] < 0) continue;
-            const long b0 = band(q), b1 = band(it->second);
-            if (b0 == b1) parent[root(q)] = root(it->second);
-        }
-    }
-    for (std::size_t q = 0; q < voxels.size(); ++q) {
-        if (distance[q] < 0) continue;
-        const auto s = static_cast<std::int64_t>(voxels[q]);
-        const std::int64_t i = s % nx, j = (s / nx) % ny, k = s / (nx * ny);
-        for (int a = 0; a < 3; ++a)
-            for (int d : {-1, 1}) {
-                std::int64_t n[3] = {i, j, k};
-                n[a] += d;
-                if (n[a] < 0 || n[a] >= (a == 0 ? nx : a == 1 ? ny : nz)) continue;
-                const auto it = local.find(static_cast<std::size_t>(g.linear_index(n[0], n[1], n[2])));
-                if (it == local.end() || distance[it->second] < 0) continue;
-                if (band(it->second) == band(q) + 1) cross.emplace_back(root(q), root(it->second));
-            }
-    }
+    for (std::size_t q = 0; q < voxels.size(); ++q)
+        if (distance[q] >= 0)
+            for_each_neighbour(q, [&](std::size_t n, int) {
+                if (distance[n] >= 0 && band(n) == band(q)) parent[root(q)] = root(n);
+            });
+    std::vector<std::pair<std::size_t, std::size_t>> cross; // (piece in band b, piece in band b+1)
+    for (std::size_t q = 0; q < voxels.size(); ++q)
+        if (distance[q] >= 0)
+            for_each_neighbour(q, [&](std::size_t n, int) {
+                if (distance[n] >= 0 && band(n) == band(q) + 1) cross.emplace_back(root(q), root(n));
+            });
     std::map<std::size_t, std::vector<std::size_t>> children;
     for (const auto& [piece, next] : cross) children[piece].push_back(next);
     std::map<std::size_t, std::vector<std::size_t>> members;
@@ -192,7 +180,7 @@ void vessel_features(const LabelVolume& v, const std::vector<std::size_t>& voxel
     for (auto& [piece, next] : children) {
         std::sort(next.begin(), next.end());
         next.erase(std::unique(next.begin(), next.end()), next.end());
-        // Ignore stubs: a split counts when at least two child pieces are substantial.
+        // A split counts when at least two child pieces have ≥ 4 voxels (not a one-voxel bump of the wall).
         int substantial = 0;
         for (const auto n : next) substantial += members[n].size() >= 4 ? 1 : 0;
         if (substantial >= 2) bifurcations.push_back(centroid(v, members[piece]));
