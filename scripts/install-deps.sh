@@ -11,6 +11,7 @@ packages=(
   libyaml-cpp-dev          # tissue tables
   libspdlog-dev libfmt-dev # logging, formatting
   libpugixml-dev           # VTU (XML) reading
+  libnlopt-cxx-dev         # BOBYQA / Nelder–Mead: parameter estimation
   zlib1g-dev               # compressed VTU arrays
   libgtest-dev libgmock-dev libbenchmark-dev
 )

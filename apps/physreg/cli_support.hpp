@@ -25,6 +25,9 @@ void add_subcommand_convert(CLI::App& app);
 void add_subcommand_demo(CLI::App& app);
 void add_subcommand_simulate(CLI::App& app);
 void add_subcommand_phantom(CLI::App& app);
+void add_subcommand_estimate(CLI::App& app);
+void add_subcommand_register_compression(CLI::App& app);
+void add_subcommand_evaluate(CLI::App& app);
 
 nlohmann::json to_json(const ImageGeometry& geometry);
 nlohmann::json to_json(const HexGrid& grid);

@@ -23,6 +23,9 @@ int main(int argc, char** argv)
     physreg::cli::add_subcommand_convert(app);
     physreg::cli::add_subcommand_simulate(app);
     physreg::cli::add_subcommand_phantom(app);
+    physreg::cli::add_subcommand_estimate(app);
+    physreg::cli::add_subcommand_register_compression(app);
+    physreg::cli::add_subcommand_evaluate(app);
     physreg::cli::add_subcommand_demo(app);
     app.parse_complete_callback([&] { physreg::logger()->set_level(spdlog::level::from_str(log_level)); });
     try {

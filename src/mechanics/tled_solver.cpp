@@ -83,6 +83,29 @@ TledSolver<Real>::TledSolver(const TledModel& model) : m_model(model), m_n(model
     m_external.assign(dofs, 0);
     m_constrained.assign(dofs, 0);
     m_prescribed.assign(dofs, 0);
+    m_stiffness_bound = model.stiffness_bound();
+    m_time_step = model.time_step_s();
+}
+
+template <typename Real>
+void TledSolver<Real>::set_coupling(const PenaltyCoupling* coupling)
+{
+    if (coupling && coupling->node_count() != m_n)
+        fail("coupling built for {} nodes, the model has {}", coupling->node_count(), m_n);
+    m_coupling = coupling && !coupling->empty() ? coupling : nullptr;
+    m_stiffness_bound = m_model.stiffness_bound();
+    m_time_step = m_model.time_step_s();
+    if (!m_coupling) return;
+    // Stable step: ω_max² ≤ ω_elements² + max_j (coupling row bound / m_j) (the largest eigenvalue of
+    // a sum of symmetric matrices is at most the sum of the largest ones).
+    const auto bound = m_coupling->stiffness_bound();
+    double omega2 = 0.0;
+    for (std::size_t j = 0; j < m_n; ++j) {
+        m_stiffness_bound[j] += bound[j];
+        omega2 = std::max(omega2, bound[j] / m_model.lumped_mass()[j]);
+    }
+    const double omega_elements = 2.0 / m_model.critical_time_step_s();
+    m_time_step = m_model.options().time_step_safety * 2.0 / std::sqrt(omega_elements * omega_elements + omega2);
 }
 
 template <typename Real>
@@ -225,6 +248,11 @@ void TledSolver<Real>::forces_in_parallel_region(const Real* u, Real* f, bool ze
             }
         }
     }
+    if (m_coupling) {
+        // Element loops end with a barrier; the coupling scatters serially (fixed order).
+#pragma omp single
+        m_coupling->add_forces(u, f);
+    }
     if (inverted != LONG_MAX) {
 #pragma omp critical(physreg_inverted)
         m_inverted_element = std::min(m_inverted_element, inverted);
@@ -336,7 +364,7 @@ template <typename Real>
 void TledSolver<Real>::advance(double duration_s, const ProgressCallback& progress)
 {
     if (!(duration_s >= 0 && std::isfinite(duration_s))) fail("simulation duration {} s must be ≥ 0", duration_s);
-    const double dt = m_model.time_step_s();
+    const double dt = m_time_step;
     const long steps = static_cast<long>(std::ceil(duration_s / dt - 1e-9));
     const double alpha = m_model.options().damping_per_s;
     const std::size_t dofs = 3 * m_n;
@@ -458,7 +486,7 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
     std::vector<Real> inverse_mass(m_n);
     std::vector<double> mass(m_n);
     for (std::size_t i = 0; i < m_n; ++i) {
-        mass[i] = options.mass_safety * m_model.stiffness_bound()[i] / 4.0;
+        mass[i] = options.mass_safety * m_stiffness_bound[i] / 4.0;
         if (!(mass[i] > 0)) fail("node {} belongs to no element with stiffness", i);
         inverse_mass[i] = static_cast<Real>(1.0 / mass[i]);
     }
@@ -619,7 +647,11 @@ Energies TledSolver<Real>::energies() const
             }
         }
     }
-    const double dt = m_model.time_step_s();
+    if (m_coupling) {
+        const std::vector<double> u(m_u.begin(), m_u.end());
+        out.coupling_mj = m_coupling->energy_mj(u);
+    }
+    const double dt = m_time_step;
     for (std::size_t i = 0; i < m_n; ++i) {
         Vec3 v;
         for (int d = 0; d < 3; ++d) v[d] = (double(m_u[3 * i + d]) - double(m_u_prev[3 * i + d])) / dt;

@@ -57,4 +57,23 @@ std::vector<CellFace> match_faces(const VolumeMesh& mesh)
     return out;
 }
 
+std::vector<BoundaryFace> boundary_faces(const VolumeMesh& mesh)
+{
+    std::vector<BoundaryFace> out;
+    for (const auto& f : match_faces(mesh)) {
+        if (f.neighbour >= 0) continue;
+        BoundaryFace b{f.nodes, f.node_count(), Vec3::Zero(), Vec3::Zero(), 0.0};
+        Vec3 cross;
+        if (b.count == 4)
+            cross = 0.5 * (mesh.nodes[f.nodes[2]] - mesh.nodes[f.nodes[0]]).cross(mesh.nodes[f.nodes[3]] - mesh.nodes[f.nodes[1]]);
+        else
+            cross = 0.5 * (mesh.nodes[f.nodes[1]] - mesh.nodes[f.nodes[0]]).cross(mesh.nodes[f.nodes[2]] - mesh.nodes[f.nodes[0]]);
+        b.area = cross.norm();
+        b.normal = cross / b.area;
+        for (int a = 0; a < b.count; ++a) b.centroid += mesh.nodes[f.nodes[a]] / b.count;
+        out.push_back(b);
+    }
+    return out;
+}
+
 } // namespace physreg

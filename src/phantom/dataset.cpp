@@ -196,38 +196,12 @@ Prepared prepare_labels(const PhantomSpec& spec)
     return p;
 }
 
-struct BoundaryFaceInfo {
-    std::array<std::int32_t, 4> nodes;
-    int count;
-    Vec3 normal, centroid;
-    double area;
-};
-
-std::vector<BoundaryFaceInfo> boundary_faces(const VolumeMesh& mesh)
-{
-    std::vector<BoundaryFaceInfo> out;
-    for (const auto& f : match_faces(mesh)) {
-        if (f.neighbour >= 0) continue;
-        BoundaryFaceInfo b{f.nodes, f.node_count(), Vec3::Zero(), Vec3::Zero(), 0.0};
-        Vec3 cross;
-        if (b.count == 4)
-            cross = 0.5 * (mesh.nodes[f.nodes[2]] - mesh.nodes[f.nodes[0]]).cross(mesh.nodes[f.nodes[3]] - mesh.nodes[f.nodes[1]]);
-        else
-            cross = 0.5 * (mesh.nodes[f.nodes[1]] - mesh.nodes[f.nodes[0]]).cross(mesh.nodes[f.nodes[2]] - mesh.nodes[f.nodes[0]]);
-        b.area = cross.norm();
-        b.normal = cross / b.area;
-        for (int a = 0; a < b.count; ++a) b.centroid += mesh.nodes[f.nodes[a]] / b.count;
-        out.push_back(b);
-    }
-    return out;
-}
-
 // The ground-truth model: the organs that deform, on a grid finer than the evaluated models'.
 struct GroundTruth {
     TissueTable tissues;
     VolumeMesh mesh;
     std::unique_ptr<TledModel> model;
-    std::vector<BoundaryFaceInfo> faces;
+    std::vector<BoundaryFace> faces;
     std::vector<std::int32_t> fixed_nodes, boundary_nodes;
     Vec3 cell_size;
     /// A model on a grid half as fine: its solution, interpolated, starts the fine relaxation.
@@ -1064,6 +1038,23 @@ PhantomDataset read_phantom_dataset(const fs::path& directory)
                 state.surfaces[std::stoi(percent)] = {entry.at("ply").get<std::string>(), entry.at("csv").get<std::string>()};
             state.max_displacement_mm = s.value("max_displacement_mm", 0.0);
             state.depth_mm = s.value("depth_mm", 0.0);
+            if (s.contains("tool")) {
+                const auto& t = s.at("tool");
+                auto vec = [](const json& v) { return Vec3(v.at(0).get<double>(), v.at(1).get<double>(), v.at(2).get<double>()); };
+                Indenter tool;
+                tool.name = "tool_" + state.name;
+                tool.shape = parse_indenter_shape(t.at("shape").get<std::string>());
+                tool.radius_mm = t.at("radius_mm").get<double>();
+                tool.axis = vec(t.at("axis"));
+                tool.half_extents_mm = vec(t.at("half_extents_mm"));
+                tool.path = {vec(t.at("contact_position_mm")), vec(t.at("final_position_mm"))};
+                try {
+                    tool.validate();
+                } catch (const Error& e) {
+                    fail("dataset manifest '{}': state {}: tool: {}", path.string(), state.name, e.what());
+                }
+                state.tool = tool;
+            }
             d.states.push_back(state);
         }
     } catch (const json::exception& e) {

@@ -10,6 +10,7 @@
 // blocks: results are bitwise identical for 1, 2 or more threads.
 #include "physreg/mechanics/loads.hpp"
 #include "physreg/mechanics/tled_model.hpp"
+#include "physreg/mechanics/tissue_coupling.hpp"
 
 #include <functional>
 #include <string>
@@ -49,6 +50,8 @@ struct Energies {
     double strain_mj = 0.0;    ///< Σ V Ψ(F), mJ (N·mm)
     double hourglass_mj = 0.0; ///< ½ Σ k Σ_α |Σ_b Γ_bα u_b|², mJ
     double kinetic_mj = 0.0;   ///< dynamic runs: ½ Σ m |v|², mJ
+    double coupling_mj = 0.0;  ///< tissue–tissue penalty coupling: ½ Σ k_c |δ|², mJ
+    double total_mj() const { return strain_mj + hourglass_mj + kinetic_mj + coupling_mj; }
 };
 
 /// Progress callback: fraction done in [0, 1] (dynamic runs) or -1 with the iteration (static).
@@ -62,6 +65,12 @@ public:
     /// Replaces the loads (validated against the model). Keeps the displacement (warm start).
     void set_loads(Loads loads);
     const Loads& loads() const { return m_loads; }
+    /// Adds tissue–tissue penalty coupling forces to every force evaluation (nullptr: none). The
+    /// coupling must outlive the solver's use of it and match the model's nodes. Its stiffness
+    /// enters the explicit time step and the dynamic-relaxation masses.
+    void set_coupling(const PenaltyCoupling* coupling);
+    /// Explicit step used by advance(): the model's stable step, reduced when a stiff coupling needs it.
+    double time_step_s() const { return m_time_step; }
 
     /// Explicit dynamics from the current state for `duration_s`, at the model's stable step.
     /// Throws Error naming the step and element on inversion (J ≤ 0) or divergence.
@@ -95,6 +104,9 @@ private:
 
     const TledModel& m_model;
     Loads m_loads;
+    const PenaltyCoupling* m_coupling = nullptr;
+    std::vector<double> m_stiffness_bound; ///< the model's plus the coupling's, N/mm
+    double m_time_step = 0.0;
     std::size_t m_n = 0;
     // Model data in the solver's precision.
     std::vector<Real> m_dn, m_gamma, m_volume, m_vb2, m_mu, m_lambda, m_kappa, m_hourglass;

@@ -21,4 +21,14 @@ std::vector<std::array<int, 4>> local_faces(CellType type);
 /// Every face once: interior faces carry both cells (cell < neighbour), boundary faces one.
 /// Throws Error if a face is shared by more than two cells (non-manifold, overlapping cells).
 std::vector<CellFace> match_faces(const VolumeMesh& mesh);
+
+/// A boundary face with its outward unit normal, centroid (mm) and area (mm²) in the mesh's
+/// reference configuration.
+struct BoundaryFace {
+    std::array<std::int32_t, 4> nodes;
+    int count;
+    Vec3 normal, centroid;
+    double area;
+};
+std::vector<BoundaryFace> boundary_faces(const VolumeMesh& mesh);
 } // namespace physreg

@@ -99,6 +99,8 @@ struct DatasetState {
     std::map<int, std::pair<std::string, std::string>> surfaces; ///< percentage → (PLY, CSV)
     double max_displacement_mm = 0.0;
     double depth_mm = 0.0;                         ///< compressions
+    /// Compressions: the tool, its path from first contact (load factor 0) to the final position (1).
+    std::optional<Indenter> tool;
 };
 
 struct PhantomDataset {

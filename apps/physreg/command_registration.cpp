@@ -1,0 +1,288 @@
+// physreg estimate / register-compression / evaluate: paper 000's heterogeneous model — fit its
+// parameters on training compressions, predict a compression, and measure TRE.
+#include "cli_support.hpp"
+#include "progress.hpp"
+
+#include "physreg/core/atomic_file.hpp"
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+#include "physreg/evaluation/tre.hpp"
+#include "physreg/field/displacement_sampling.hpp"
+#include "physreg/io/image_io.hpp"
+#include "physreg/io/landmarks_io.hpp"
+#include "physreg/io/png.hpp"
+#include "physreg/io/vtu.hpp"
+#include "physreg/mesh/hex_meshing.hpp"
+#include "physreg/phantom/dataset.hpp"
+#include "physreg/registration/estimation.hpp"
+
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+namespace physreg::cli {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+std::vector<std::string> split_names(const std::string& text, const std::string& option)
+{
+    std::vector<std::string> names;
+    std::stringstream in(text);
+    std::string item;
+    while (std::getline(in, item, ','))
+        if (!item.empty()) names.push_back(item);
+    if (names.empty()) fail("{}: no state names in '{}'", option, text);
+    return names;
+}
+
+// Model options shared by the three commands that build a model.
+struct ModelOptions {
+    std::string variant = "coupled", grid;
+    std::optional<double> k_tumour, k_vessel, support_radius;
+};
+
+void add_model_options(CLI::App* sub, ModelOptions& m)
+{
+    sub->add_option("--variant", m.variant, "Model: homogeneous (Han et al.), shared-nodes (per-element materials) or coupled (MLS "
+                                            "penalty coupling, paper 000; default)");
+    sub->add_option("--grid", m.grid, "Cells over the liver's bounding box per image axis (default 74x54x18)");
+    sub->add_option("--k-tumour", m.k_tumour, "Parenchyma–tumour coupling stiffness k_c,s-t, N/m (default 600, paper 000)");
+    sub->add_option("--k-vessel", m.k_vessel, "Parenchyma–vessel coupling stiffness k_c,s-v, N/m (default 500, paper 000)");
+    sub->add_option("--support-radius", m.support_radius, "MLS support radius, element sizes (default 1.6)");
+}
+
+ModelParameters model_parameters(const ModelOptions& m, ModelParameters p)
+{
+    p.variant = parse_model_variant(m.variant);
+    if (!m.grid.empty()) p.grid = parse_grid_dims(m.grid, "--grid");
+    if (m.k_tumour) p.coupling.parenchyma_tumour_n_per_m = *m.k_tumour;
+    if (m.k_vessel) p.coupling.parenchyma_vessel_n_per_m = *m.k_vessel;
+    if (m.support_radius) p.support_radius_cells = *m.support_radius;
+    try {
+        p.validate();
+    } catch (const Error& e) {
+        fail("model parameters: {}", e.what());
+    }
+    return p;
+}
+
+json parameters_json(const ModelParameters& p)
+{
+    return {{"variant", to_string(p.variant)},
+            {"k_c_s_t_n_per_m", p.coupling.parenchyma_tumour_n_per_m},
+            {"k_c_s_v_n_per_m", p.coupling.parenchyma_vessel_n_per_m},
+            {"young_modulus_pa", {{"parenchyma", p.parenchyma_young_pa}, {"tumour", p.tumour_young_pa}, {"vessel", p.vessel_young_pa}}},
+            {"grid_cells", {p.grid[0], p.grid[1], p.grid[2]}}};
+}
+
+std::string tre_line(const TreReport& r)
+{
+    return fmt::format("all {:.3f} ± {:.3f} (max {:.3f}) | surface {:.3f} | internal {:.3f} (tumour {:.3f}, vessel {:.3f}) mm", r.all.mean_mm,
+                       r.all.std_mm, r.all.max_mm, r.surface.mean_mm, r.internal.mean_mm, r.tumour.mean_mm, r.vessel.mean_mm);
+}
+
+} // namespace
+
+void add_subcommand_estimate(CLI::App& app)
+{
+    struct Options : CommonOptions {
+        std::string dataset, train = "A,B,C", validate = "D,E", output, report_file, algorithm = "bobyqa";
+        ModelOptions model;
+        bool fit_moduli = false;
+        int max_evaluations = 30;
+        double k_min = 1.0, k_max = 1e5;
+    };
+    auto o = std::make_shared<Options>();
+    auto* sub = app.add_subcommand("estimate", "Fit the model's coupling stiffnesses (and optionally tumour/vessel moduli) to the "
+                                               "landmarks of training compressions (paper 000 eqs. 6–7); report TRE");
+    sub->add_option("--dataset", o->dataset, "Phantom dataset directory (physreg phantom)")->required();
+    sub->add_option("--train", o->train, "Training compressions (default A,B,C)");
+    sub->add_option("--validate", o->validate, "Validation compressions (default D,E; \"none\" for none)");
+    add_model_options(sub, o->model);
+    sub->add_flag("--fit-moduli", o->fit_moduli, "Also fit the tumour and vessel Young's moduli (log-scaled, 1e4 … 1e8 Pa)");
+    sub->add_option("--k-bounds", [o](const std::vector<std::string>& v) {
+        if (v.size() != 2) return false;
+        o->k_min = std::stod(v[0]), o->k_max = std::stod(v[1]);
+        return true;
+    }, "Bounds of the coupling stiffnesses, N/m (default 1 1e5)")->expected(2);
+    sub->add_option("--optimizer", o->algorithm, "bobyqa (default) or neldermead (NLopt)");
+    sub->add_option("--max-evaluations", o->max_evaluations, "Objective evaluations at most (default 30)");
+    sub->add_option("-o,--output", o->output, "Parameter file to write (JSON; read by register-compression)")->required();
+    sub->add_option("--report", o->report_file, "Also write the full report (TRE per compression and landmark, history) as JSON");
+    sub->add_flag("--json", o->json, "Print the report as JSON on stdout");
+    sub->callback([o] {
+        check_output_path(o->output, "--output");
+        if (!o->report_file.empty()) check_output_path(o->report_file, "--report");
+        const PhantomDataset dataset = read_phantom_dataset(o->dataset);
+        const ModelParameters initial = model_parameters(o->model, ModelParameters{});
+        const auto train = compression_cases(dataset, split_names(o->train, "--train"));
+        const auto validation = o->validate == "none" ? std::vector<CompressionCase>{} : compression_cases(dataset, split_names(o->validate, "--validate"));
+        const DatasetState& rest = dataset.state("rest");
+        const LabelVolume labels = read_label_volume(dataset.path(rest.files.at("labels")));
+        const LandmarkSet rest_landmarks = read_landmarks(dataset.path(rest.files.at("landmarks")));
+        EstimationOptions options;
+        options.fit_moduli = o->fit_moduli;
+        options.k_min_n_per_m = o->k_min;
+        options.k_max_n_per_m = o->k_max;
+        options.algorithm = o->algorithm;
+        options.max_evaluations = o->max_evaluations;
+        ProgressDisplay bar("estimate");
+        const EstimationResult r = estimate_parameters(labels, dataset.roles, initial, rest_landmarks, train, validation, options,
+                                                       [&](double f, const std::string& m) { bar.update(f, m); });
+        bar.finish();
+        json summary;
+        summary["dataset"] = o->dataset;
+        summary["optimiser"] = r.optimiser;
+        summary["stop_reason"] = r.stop_reason;
+        summary["evaluations"] = r.history.size();
+        summary["seconds"] = r.seconds;
+        summary["objective"] = "mean TRE over every landmark of the training compressions, mm";
+        summary["objective_mm"] = r.objective_mm;
+        summary["fitted"] = parameters_json(r.fitted);
+        summary["mesh_fingerprint"] = r.fingerprint;
+        summary["train"] = json::parse(tre_stats_json(r.train_pooled));
+        if (!r.validation.empty()) summary["validation"] = json::parse(tre_stats_json(r.validation_pooled));
+        for (const auto& [name, rep] : r.train) summary["per_compression"][name] = json::parse(tre_stats_json(rep));
+        for (const auto& [name, rep] : r.validation) summary["per_compression"][name] = json::parse(tre_stats_json(rep));
+        const json fit = {{"objective_mm", r.objective_mm}, {"train", summary["train"]}, {"validation", summary.value("validation", json())},
+                          {"optimiser", r.optimiser}, {"evaluations", r.history.size()}, {"dataset", o->dataset}};
+        write_model_parameters(o->output, r.fitted, r.fingerprint, fit.dump());
+        if (!o->report_file.empty()) {
+            json full = summary;
+            for (const auto& step : r.history) full["history"].push_back({{"parameters", parameters_json(step.parameters)}, {"objective_mm", step.objective_mm}});
+            for (const auto& [name, rep] : r.train) full["landmarks"][name] = json::parse(tre_report_json(rep));
+            for (const auto& [name, rep] : r.validation) full["landmarks"][name] = json::parse(tre_report_json(rep));
+            write_atomically(o->report_file, [&](const fs::path& tmp) { std::ofstream(tmp) << full.dump(2) << "\n"; });
+        }
+        std::cerr << fmt::format("estimate ({}, {} evaluations, {:.1f} s; {}): k_c,s-t = {:.4g} N/m, k_c,s-v = {:.4g} N/m, "
+                                 "E tumour {:.4g} Pa, E vessel {:.4g} Pa\n",
+                                 r.optimiser, r.history.size(), r.seconds, r.stop_reason, r.fitted.coupling.parenchyma_tumour_n_per_m,
+                                 r.fitted.coupling.parenchyma_vessel_n_per_m, r.fitted.tumour_young_pa, r.fitted.vessel_young_pa);
+        for (const auto& [name, rep] : r.train) std::cerr << fmt::format("  train {:<6} {}\n", name, tre_line(rep));
+        std::cerr << fmt::format("  TRAIN        {}\n", tre_line(r.train_pooled));
+        for (const auto& [name, rep] : r.validation) std::cerr << fmt::format("  validate {:<3} {}\n", name, tre_line(rep));
+        if (!r.validation.empty()) std::cerr << fmt::format("  VALIDATION   {}\n", tre_line(r.validation_pooled));
+        std::cerr << fmt::format("  parameters written to {}\n", o->output);
+        if (o->json) std::cout << summary.dump(2) << std::endl;
+    });
+}
+
+void add_subcommand_register_compression(CLI::App& app)
+{
+    struct Options : CommonOptions {
+        std::string dataset, state, parameters, output;
+        ModelOptions model;
+        double field_spacing = 1.0;
+        bool replace = false;
+    };
+    auto o = std::make_shared<Options>();
+    auto* sub = app.add_subcommand("register-compression", "Predict a tool compression with the model: deformed mesh (VTU), landmark "
+                                                           "positions (CSV) and dense displacement field (ITK image)");
+    sub->add_option("--dataset", o->dataset, "Phantom dataset directory (rest labels and landmarks, the tool's path)")->required();
+    sub->add_option("--state", o->state, "The compression to predict (e.g. D)")->required();
+    auto* params = sub->add_option("--parameters", o->parameters, "Parameter file from physreg estimate (else --variant/--k-* or defaults)");
+    add_model_options(sub, o->model);
+    sub->add_option("--field-spacing", o->field_spacing, "Voxel size of the displacement field over the mesh, mm (default 1)");
+    sub->add_option("-o,--output", o->output, "Output directory (created)")->required();
+    sub->add_flag("--force", o->replace, "Replace an existing output directory (only once the new one is complete)");
+    sub->add_flag("--json", o->json, "Print a JSON summary on stdout");
+    (void)params;
+    sub->callback([o] {
+        const PhantomDataset dataset = read_phantom_dataset(o->dataset);
+        const auto cases = compression_cases(dataset, {o->state});
+        const DatasetState& rest = dataset.state("rest");
+        const LabelVolume labels = read_label_volume(dataset.path(rest.files.at("labels")));
+        const LandmarkSet rest_landmarks = read_landmarks(dataset.path(rest.files.at("landmarks")));
+        ModelParameters p;
+        std::string fingerprint;
+        if (!o->parameters.empty()) {
+            p = read_model_parameters(o->parameters, &fingerprint);
+            if (o->model.variant != "coupled" || !o->model.grid.empty() || o->model.k_tumour || o->model.k_vessel)
+                fail("--parameters: the model comes from the parameter file; drop --variant/--grid/--k-tumour/--k-vessel");
+        } else {
+            p = model_parameters(o->model, p);
+        }
+        if (!(o->field_spacing > 0)) fail("--field-spacing must be > 0 mm (got {})", o->field_spacing);
+        const LiverModel model = build_liver_model(labels, dataset.roles, p, dataset.path(rest.files.at("labels")).string());
+        if (!fingerprint.empty() && fingerprint != model.fingerprint)
+            fail("--parameters '{}': fitted on another mesh (fingerprint {}, this dataset's model {}); estimate again for this dataset",
+                 o->parameters, fingerprint, model.fingerprint);
+        StagedDirectory staging(o->output, o->replace);
+        ProgressDisplay bar("register-compression");
+        bar.update(0.05, fmt::format("{} model: {} nodes, {} hexahedra, {} interface points", to_string(p.variant), model.mesh.node_count(),
+                                     model.mesh.cell_count(), model.coupling.points().size()));
+        const auto prediction = predict_compression(model, cases[0].tool, rest_landmarks, PredictionOptions{}, "compression " + o->state);
+        bar.update(0.8, "writing outputs");
+        MeshData data;
+        data.point_data.push_back({"displacement", 3, prediction.displacement_mm});
+        write_vtu(staging.path() / "mesh.vtu", model.mesh, data);
+        write_landmarks(staging.path() / "landmarks.csv", prediction.landmarks);
+        const ImageGeometry geometry = image_grid_over_mesh(model.mesh, o->field_spacing, 2.0 * model.cell_size_mm.maxCoeff());
+        const SampledField field = sample_displacement_field(model.mesh, prediction.displacement_mm, geometry);
+        write_displacement_field(staging.path() / "displacement.nii.gz", field.field);
+        const TreReport tre = compute_tre(prediction.landmarks, cases[0].truth, "compression " + o->state);
+        json summary = {{"state", o->state},
+                        {"model", parameters_json(p)},
+                        {"nodes", model.mesh.node_count()},
+                        {"hexahedra", model.mesh.cell_count()},
+                        {"interface_points", model.coupling.points().size()},
+                        {"iterations", prediction.iterations},
+                        {"seconds", prediction.seconds},
+                        {"max_displacement_mm", prediction.max_displacement_mm},
+                        {"max_coupling_gap_mm", prediction.max_coupling_gap_mm},
+                        {"tre_against_dataset", json::parse(tre_stats_json(tre))},
+                        {"files", {{"mesh", "mesh.vtu"}, {"landmarks", "landmarks.csv"}, {"displacement", "displacement.nii.gz"}}},
+                        {"units", "mm, LPS; displacement field in the rest (pre-operative) space: x → x + u(x)"}};
+        write_atomically(staging.path() / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
+        staging.commit();
+        bar.finish();
+        std::cerr << fmt::format("register-compression {} ({}): {} iterations, {:.2f} s, max displacement {:.2f} mm; TRE {}\n", o->state,
+                                 to_string(p.variant), prediction.iterations, prediction.seconds, prediction.max_displacement_mm, tre_line(tre));
+        if (o->json) std::cout << summary.dump(2) << std::endl;
+    });
+}
+
+void add_subcommand_evaluate(CLI::App& app)
+{
+    struct Options : CommonOptions {
+        std::vector<std::string> predicted;
+        std::string truth, output, title = "TARGET REGISTRATION ERROR";
+        bool replace = false;
+    };
+    auto o = std::make_shared<Options>();
+    auto* sub = app.add_subcommand("evaluate", "TRE of predicted landmarks against ground truth: CSV, JSON and a PNG chart");
+    sub->add_option("--predicted", o->predicted, "Predicted landmarks (CSV/FCSV/Slicer JSON); LABEL=FILE to name a series; repeatable")
+        ->required();
+    sub->add_option("--truth", o->truth, "Ground-truth landmarks (matched by name)")->required();
+    sub->add_option("--title", o->title, "Chart title");
+    sub->add_option("-o,--output", o->output, "Output directory (created): tre.csv, tre.json, tre.png")->required();
+    sub->add_flag("--force", o->replace, "Replace an existing output directory (only once the new one is complete)");
+    sub->add_flag("--json", o->json, "Print the statistics as JSON on stdout");
+    sub->callback([o] {
+        const LandmarkSet truth = read_landmarks(o->truth);
+        std::vector<TreSeries> series;
+        for (const auto& item : o->predicted) {
+            const auto eq = item.find('=');
+            const std::string label = eq == std::string::npos ? fs::path(item).stem().string() : item.substr(0, eq);
+            const std::string file = eq == std::string::npos ? item : item.substr(eq + 1);
+            series.push_back({label, compute_tre(read_landmarks(file), truth, "'" + file + "' against '" + o->truth + "'")});
+        }
+        StagedDirectory staging(o->output, o->replace);
+        json summary;
+        for (std::size_t s = 0; s < series.size(); ++s) {
+            const std::string suffix = series.size() == 1 ? "" : "_" + series[s].label;
+            write_tre_csv(staging.path() / ("tre" + suffix + ".csv"), series[s].report);
+            write_atomically(staging.path() / ("tre" + suffix + ".json"),
+                             [&](const fs::path& tmp) { std::ofstream(tmp) << tre_report_json(series[s].report) << "\n"; });
+            summary[series[s].label] = json::parse(tre_stats_json(series[s].report));
+            std::cerr << fmt::format("{}: {}\n", series[s].label, tre_line(series[s].report));
+        }
+        write_png(staging.path() / "tre.png", render_tre_chart(series, o->title));
+        staging.commit();
+        if (o->json) std::cout << summary.dump(2) << std::endl;
+    });
+}
+
+} // namespace physreg::cli

@@ -1,0 +1,91 @@
+#pragma once
+// The evaluated model of paper 000 and its baselines: the liver (parenchyma, tumours, vessels) of
+// a rest label map meshed on a uniform grid (74 × 54 × 18 cells over the liver by default), TLED
+// Neo-Hookean, posterior-facing surface fixed (as in the phantom's ground truth), pressed by the
+// tracked tool. Three variants:
+//   homogeneous   one material (the parenchyma's) everywhere — Han et al.'s baseline;
+//   shared-nodes  per-element materials, tissues sharing their interface vertices;
+//   coupled       per-element materials, interface vertices split and joined by MLS penalty
+//                 coupling (paper 000 eqs. 1–5; see mechanics/tissue_coupling.hpp).
+#include "physreg/core/landmark.hpp"
+#include "physreg/image/image_geometry.hpp"
+#include "physreg/mechanics/loads.hpp"
+#include "physreg/mechanics/tissue_coupling.hpp"
+#include "physreg/mechanics/tled_solver.hpp"
+#include "physreg/phantom/abdominal_phantom.hpp"
+
+#include <filesystem>
+#include <memory>
+#include <string>
+
+namespace physreg {
+
+enum class ModelVariant { homogeneous, shared_nodes, coupled };
+ModelVariant parse_model_variant(const std::string& text); ///< homogeneous, shared-nodes, coupled
+std::string to_string(ModelVariant variant);
+
+/// Everything that defines a model: what `physreg estimate` fits and the other commands read.
+struct ModelParameters {
+    ModelVariant variant = ModelVariant::coupled;
+    CouplingStiffness coupling;              ///< N/m (coupled variant only)
+    double parenchyma_young_pa = 2e5;        ///< paper 000's phantom moduli
+    double tumour_young_pa = 5e6;
+    double vessel_young_pa = 1e6;
+    double poisson_ratio = 0.49;
+    Index3 grid{74, 54, 18};                 ///< cells over the liver's bounding box, per image axis
+    double support_radius_cells = 1.6;       ///< MLS support radius, element sizes
+    /// Throws Error naming the parameter: moduli ≤ 0 or NaN, ν ∉ (0, 0.5), grid < 2, stiffness < 0.
+    void validate() const;
+};
+
+/// JSON parameter file. `fingerprint` (of the rest mesh the parameters were fitted on) is written
+/// with them; reading returns it so that the caller can refuse a file from another mesh.
+void write_model_parameters(const std::filesystem::path& path, const ModelParameters& parameters, const std::string& fingerprint,
+                            const std::string& extra_json = "");
+ModelParameters read_model_parameters(const std::filesystem::path& path, std::string* fingerprint = nullptr);
+
+struct LiverModel {
+    ModelParameters parameters;
+    VolumeMesh mesh;                         ///< the solved mesh (split interfaces for `coupled`)
+    std::vector<std::int32_t> original_vertex; ///< per node: vertex of the unsplit grid mesh
+    TissueTable tissues;
+    std::unique_ptr<TledModel> tled;
+    PenaltyCoupling coupling;                ///< empty unless `coupled`
+    std::vector<std::int32_t> fixed_nodes;   ///< posterior-facing surface (every copy)
+    Vec3 cell_size_mm = Vec3::Zero();
+    std::string fingerprint;                 ///< hash of the unsplit mesh (positions, cells, labels)
+    /// Same mesh and tissues with new coupling stiffnesses (no re-meshing, no MLS rebuild).
+    void set_coupling_stiffness(const CouplingStiffness& stiffness);
+};
+
+/// Meshes the liver-role labels of `rest_labels`; `what` names the input in messages.
+LiverModel build_liver_model(const LabelVolume& rest_labels, const LabelRoles& roles, const ModelParameters& parameters,
+                             const std::string& what);
+
+struct PredictionOptions {
+    EquilibriumOptions equilibrium = default_equilibrium();
+    /// Largest tool travel per relaxation iteration, in smallest-cell sizes (sets the tool ramp).
+    double tool_speed_per_cell = 0.01;
+    static EquilibriumOptions default_equilibrium(); ///< 1e-3 mm and residual 1e-3 of the largest force
+};
+
+struct CompressionPrediction {
+    std::vector<double> displacement_mm;     ///< 3 per node of LiverModel::mesh
+    LandmarkSet landmarks;                   ///< the rest landmarks moved by the model
+    long iterations = 0;
+    double seconds = 0.0;
+    double max_displacement_mm = 0.0;
+    double max_coupling_gap_mm = 0.0;        ///< largest |δ| over interface points (coupled)
+};
+
+/// Static equilibrium with the tool moved from `tool.path.front()` (first contact) to
+/// `tool.path.back()`; it starts two cells back so that the model's own surface is met. Landmarks
+/// outside the mesh by more than one cell are an Error naming them; closer ones take the nearest
+/// cell's interpolation. Throws Error on inversion or non-convergence, naming `what`.
+CompressionPrediction predict_compression(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks,
+                                          const PredictionOptions& options, const std::string& what);
+
+/// Moves landmarks with nodal displacements of the model (the interpolation predict_compression uses).
+LandmarkSet move_landmarks(const LiverModel& model, const std::vector<double>& displacement_mm, const LandmarkSet& rest_landmarks);
+
+} // namespace physreg
