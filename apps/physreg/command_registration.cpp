@@ -50,7 +50,7 @@ void add_model_options(CLI::App* sub, ModelOptions& m)
     sub->add_option("--grid", m.grid, "Cells over the liver's bounding box per image axis (default 74x54x18)");
     sub->add_option("--k-tumour", m.k_tumour, "Parenchyma–tumour coupling stiffness k_c,s-t, N/m (default 600, paper 000)");
     sub->add_option("--k-vessel", m.k_vessel, "Parenchyma–vessel coupling stiffness k_c,s-v, N/m (default 500, paper 000)");
-    sub->add_option("--support-radius", m.support_radius, "MLS support radius, element sizes (default 1.6)");
+    sub->add_option("--support-radius", m.support_radius, "MLS support radius, element sizes (default 1.25)");
 }
 
 ModelParameters model_parameters(const ModelOptions& m, ModelParameters p)

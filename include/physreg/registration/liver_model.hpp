@@ -33,7 +33,7 @@ struct ModelParameters {
     double vessel_young_pa = 1e6;
     double poisson_ratio = 0.49;
     Index3 grid{74, 54, 18};                 ///< cells over the liver's bounding box, per image axis
-    double support_radius_cells = 1.6;       ///< MLS support radius, element sizes
+    double support_radius_cells = 1.25;      ///< MLS support radius, element sizes
     /// Throws Error naming the parameter: moduli ≤ 0 or NaN, ν ∉ (0, 0.5), grid < 2, stiffness < 0.
     void validate() const;
 };
