@@ -33,7 +33,7 @@ expect_no_file() {
 expect_ok "--version" "$physreg" --version
 grep -q "physreg 0" "$work/out.txt" && pass || failed "--version prints the version"
 expect_ok "--help" "$physreg" --help
-for sub in mesh coarsen info convert demo phantom "landmarks locate"; do
+for sub in mesh coarsen info convert demo phantom estimate register-compression evaluate "landmarks locate"; do
   expect_ok "$sub --help" "$physreg" $sub --help
 done
 
@@ -151,6 +151,52 @@ expect_error "phantom: depth beyond the organ" "exceeds 60 % of the organs' thic
 expect_no_file "$work/ph_bad6"
 expect_error "phantom: tool narrower than the cells" "narrower than the ground-truth cells" "$physreg" phantom --preset small --tool-radius 2 -o "$work/ph_bad6"
 expect_no_file "$work/ph_bad6"
+ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
+
+# physreg estimate / register-compression / evaluate on the small phantom (≈ 5 mm cells).
+g="--grid 36x27x12"
+expect_ok "estimate" "$physreg" --log-level warn estimate --dataset "$work/ph" --train A,B --validate D $g --max-evaluations 3 \
+  -o "$work/params.json" --report "$work/estimate_report.json" --json
+expect_file "$work/params.json"
+expect_file "$work/estimate_report.json"
+grep -q '"validation"' "$work/out.txt" && pass || failed "estimate --json reports validation TRE"
+grep -q 'VALIDATION' "$work/err.txt" && pass || failed "estimate prints the validation TRE"
+grep -q '"mesh_fingerprint"' "$work/params.json" && pass || failed "parameter file carries the mesh fingerprint"
+expect_ok "register-compression" "$physreg" --log-level warn register-compression --dataset "$work/ph" --state D \
+  --parameters "$work/params.json" -o "$work/reg_D" --json
+for f in mesh.vtu landmarks.csv displacement.nii.gz summary.json; do expect_file "$work/reg_D/$f"; done
+expect_ok "info reads the predicted field" "$physreg" info "$work/reg_D/displacement.nii.gz"
+expect_ok "register-compression homogeneous" "$physreg" --log-level warn register-compression --dataset "$work/ph" --state D \
+  --variant homogeneous $g -o "$work/reg_D_h"
+expect_ok "evaluate" "$physreg" evaluate --predicted "coupled=$work/reg_D/landmarks.csv" --predicted "homogeneous=$work/reg_D_h/landmarks.csv" \
+  --truth "$work/ph/states/D/landmarks.csv" -o "$work/eval" --json
+for f in tre_coupled.csv tre_coupled.json tre_homogeneous.csv tre.png; do expect_file "$work/eval/$f"; done
+grep -q '"internal"' "$work/out.txt" && pass || failed "evaluate --json reports internal TRE"
+expect_ok "evaluate one series" "$physreg" evaluate --predicted "$work/reg_D/landmarks.csv" --truth "$work/ph/states/D/landmarks.csv" -o "$work/eval1"
+for f in tre.csv tre.json tre.png; do expect_file "$work/eval1/$f"; done
+# Bad input: nothing written.
+expect_error "estimate: negative stiffness" "k_c,s-t" "$physreg" estimate --dataset "$work/ph" --k-tumour -5 $g -o "$work/p_bad1.json"
+expect_no_file "$work/p_bad1.json"
+expect_error "estimate: NaN stiffness" "k_c,s-v" "$physreg" estimate --dataset "$work/ph" --k-vessel nan $g -o "$work/p_bad2.json"
+expect_no_file "$work/p_bad2.json"
+expect_error "estimate: not a compression" "not a tool compression" "$physreg" estimate --dataset "$work/ph" --train insufflation $g -o "$work/p_bad3.json"
+expect_no_file "$work/p_bad3.json"
+expect_error "estimate: unknown variant" "homogeneous, shared-nodes, coupled" "$physreg" estimate --dataset "$work/ph" --variant jelly -o "$work/p_bad4.json"
+expect_error "estimate: not a dataset" "manifest.json" "$physreg" estimate --dataset "$work" -o "$work/p_bad5.json"
+expect_no_file "$work/p_bad5.json"
+sed 's/"mesh_fingerprint": "[0-9a-f]*/"mesh_fingerprint": "0123456789abcdef/' "$work/params.json" > "$work/params_other.json"
+expect_error "register: parameters from another mesh" "fitted on another mesh" "$physreg" register-compression --dataset "$work/ph" --state D \
+  --parameters "$work/params_other.json" -o "$work/reg_bad1"
+expect_no_file "$work/reg_bad1"
+sed 's/"parenchyma_tumour": [0-9.e+]*/"parenchyma_tumour": -3/' "$work/params.json" > "$work/params_neg.json"
+expect_error "register: negative stiffness in the file" "params_neg.json" "$physreg" register-compression --dataset "$work/ph" --state D \
+  --parameters "$work/params_neg.json" -o "$work/reg_bad2"
+expect_no_file "$work/reg_bad2"
+expect_error "register: grid finer than the voxels" "larger than" "$physreg" register-compression --dataset "$work/ph" --state D --grid 500x27x12 -o "$work/reg_bad3"
+expect_no_file "$work/reg_bad3"
+head -n 5 "$work/reg_D/landmarks.csv" > "$work/few.csv"
+expect_error "evaluate: landmarks missing" "no prediction" "$physreg" evaluate --predicted "$work/few.csv" --truth "$work/ph/states/D/landmarks.csv" -o "$work/eval_bad"
+expect_no_file "$work/eval_bad"
 ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
 
 echo "$passes passed, $failures failed"

@@ -1,0 +1,187 @@
+// The liver model variants, compression prediction, TRE and parameter estimation on the small
+// phantom dataset.
+#include "test_support.hpp"
+
+#include "physreg/evaluation/tre.hpp"
+#include "physreg/io/image_io.hpp"
+#include "physreg/io/landmarks_io.hpp"
+#include "physreg/phantom/dataset.hpp"
+#include "physreg/registration/estimation.hpp"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+namespace physreg {
+namespace {
+
+// One small dataset for the whole suite (≈ 3 s to make).
+struct SmallDataset {
+    test::TempDir dir;
+    PhantomDataset dataset;
+    LabelVolume labels;
+    LandmarkSet rest;
+    SmallDataset()
+    {
+        generate_phantom_dataset(PhantomSpec::preset_spec("small"), dir / "ds", false, {});
+        dataset = read_phantom_dataset(dir / "ds");
+        labels = read_label_volume(dataset.path(dataset.state("rest").files.at("labels")));
+        rest = read_landmarks(dataset.path(dataset.state("rest").files.at("landmarks")));
+    }
+};
+
+const SmallDataset& small()
+{
+    static const SmallDataset d;
+    return d;
+}
+
+ModelParameters small_model(ModelVariant variant)
+{
+    ModelParameters p;
+    p.variant = variant;
+    p.grid = {36, 27, 12}; // ≈ 5 mm cells on the small preset (4 mm voxels)
+    return p;
+}
+
+TEST(Tre, StatisticsGroupsAndMissingLandmarks)
+{
+    const LandmarkSet truth{{"S1", {0, 0, 0}, LandmarkType::surface}, {"T1", {1, 0, 0}, LandmarkType::tumour},
+                            {"V1", {0, 1, 0}, LandmarkType::vessel}, {"V2", {0, 0, 1}, LandmarkType::vessel}};
+    LandmarkSet predicted = truth;
+    predicted[0].position += Vec3(3, 4, 0); // 5 mm
+    predicted[1].position += Vec3(0, 0, 1); // 1 mm
+    predicted[2].position += Vec3(2, 0, 0); // 2 mm
+    std::swap(predicted[0], predicted[3]);  // matched by name, not order
+    const TreReport r = compute_tre(predicted, truth, "t");
+    EXPECT_EQ(r.all.count, 4u);
+    EXPECT_DOUBLE_EQ(r.all.mean_mm, 2.0);
+    EXPECT_DOUBLE_EQ(r.all.max_mm, 5.0);
+    EXPECT_NEAR(r.all.std_mm, std::sqrt((9.0 + 1.0 + 0.0 + 4.0) / 4.0), 1e-12);
+    EXPECT_DOUBLE_EQ(r.surface.mean_mm, 5.0);
+    EXPECT_DOUBLE_EQ(r.internal.mean_mm, 1.0);
+    EXPECT_DOUBLE_EQ(r.tumour.mean_mm, 1.0);
+    EXPECT_DOUBLE_EQ(r.vessel.mean_mm, 1.0);
+    const TreReport pooled = pool_tre({r, r});
+    EXPECT_EQ(pooled.all.count, 8u);
+    EXPECT_DOUBLE_EQ(pooled.all.mean_mm, 2.0);
+    predicted.pop_back();
+    const auto message = test::error_message([&] { compute_tre(predicted, truth, "case X"); });
+    EXPECT_NE(message.find("case X"), std::string::npos);
+    EXPECT_NE(message.find("no prediction"), std::string::npos) << message;
+    // The chart and the CSV are written.
+    test::TempDir dir;
+    write_tre_csv(dir / "tre.csv", r);
+    std::ifstream in(dir / "tre.csv");
+    std::string header;
+    std::getline(in, header);
+    EXPECT_NE(header.find("error_mm"), std::string::npos);
+    const RgbImage chart = render_tre_chart({{"A", r}, {"B", r}}, "TRE");
+    EXPECT_GT(chart.width, 100);
+}
+
+TEST(LiverModel, VariantsShareTheMeshAndPredictTheCompression)
+{
+    const auto& d = small();
+    const auto cases = compression_cases(d.dataset, {"B"}); // the one that moves landmarks most (S06 6.6 mm)
+    ASSERT_EQ(cases.size(), 1u);
+    std::map<ModelVariant, TreReport> tre;
+    std::string fingerprint;
+    for (const auto variant : {ModelVariant::homogeneous, ModelVariant::shared_nodes, ModelVariant::coupled}) {
+        const LiverModel model = build_liver_model(d.labels, d.dataset.roles, small_model(variant), "small rest");
+        if (fingerprint.empty()) fingerprint = model.fingerprint;
+        EXPECT_EQ(model.fingerprint, fingerprint) << "the fingerprint is of the unsplit mesh, the same for every variant";
+        EXPECT_FALSE(model.fixed_nodes.empty());
+        if (variant == ModelVariant::coupled) {
+            EXPECT_GT(model.coupling.points().size(), 10u);
+            EXPECT_GT(model.mesh.node_count(), model.original_vertex.size() - model.coupling.points().size());
+        } else {
+            EXPECT_TRUE(model.coupling.empty());
+        }
+        const auto prediction = predict_compression(model, cases[0].tool, d.rest, {}, "B");
+        EXPECT_GT(prediction.max_displacement_mm, 0.5 * d.dataset.state("B").depth_mm);
+        tre[variant] = compute_tre(prediction.landmarks, cases[0].truth, "B");
+        // Landmarks the compression moved by ≥ 1 mm: the model brings them much closer than leaving
+        // them at rest (5 mm cells; a 24 × 18 × 10 grid, 8 mm cells, is too coarse for this).
+        LandmarkSet moved;
+        for (std::size_t i = 0; i < d.rest.size(); ++i)
+            if ((cases[0].truth[i].position - d.rest[i].position).norm() >= 1.0) moved.push_back(cases[0].truth[i]);
+        ASSERT_GE(moved.size(), 3u);
+        const TreReport near = compute_tre(prediction.landmarks, moved, "B moved"), still = compute_tre(d.rest, moved, "B moved");
+        EXPECT_LT(near.all.mean_mm, 0.5 * still.all.mean_mm) << to_string(variant);
+        if (variant == ModelVariant::coupled) EXPECT_GT(prediction.max_coupling_gap_mm, 0.0);
+    }
+    // Paper 000's coupling (600 / 500 N/m) is soft: the coupled model differs from shared nodes.
+    EXPECT_NE(tre[ModelVariant::coupled].all.mean_mm, tre[ModelVariant::shared_nodes].all.mean_mm);
+}
+
+TEST(LiverModel, ParameterFileRoundTripAndBadValues)
+{
+    test::TempDir dir;
+    ModelParameters p = small_model(ModelVariant::coupled);
+    p.coupling = {1234.5, 67.25};
+    p.tumour_young_pa = 3.5e6;
+    write_model_parameters(dir / "p.json", p, "abc-1n-1e");
+    std::string fingerprint;
+    const ModelParameters q = read_model_parameters(dir / "p.json", &fingerprint);
+    EXPECT_EQ(fingerprint, "abc-1n-1e");
+    EXPECT_EQ(q.variant, p.variant);
+    EXPECT_EQ(q.coupling.parenchyma_tumour_n_per_m, 1234.5);
+    EXPECT_EQ(q.coupling.parenchyma_vessel_n_per_m, 67.25);
+    EXPECT_EQ(q.tumour_young_pa, 3.5e6);
+    EXPECT_EQ(q.grid, p.grid);
+    // A negative stiffness in the file: refused naming the file and the parameter.
+    std::ifstream in(dir / "p.json");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    text.replace(text.find("1234.5"), 6, "-12.5");
+    std::ofstream(dir / "bad.json") << text;
+    const auto message = test::error_message([&] { read_model_parameters(dir / "bad.json"); });
+    EXPECT_NE(message.find("bad.json"), std::string::npos) << message;
+    EXPECT_NE(message.find("k_c,s-t"), std::string::npos) << message;
+    ModelParameters nan = p;
+    nan.vessel_young_pa = std::nan("");
+    EXPECT_NE(test::error_message([&] { nan.validate(); }).find("vessel Young's modulus"), std::string::npos);
+    EXPECT_NE(test::error_message([&] { write_model_parameters(dir / "nan.json", nan, "x"); }).find("vessel"), std::string::npos);
+    EXPECT_FALSE(std::filesystem::exists(dir / "nan.json"));
+    EXPECT_NE(test::error_message([] { parse_model_variant("rubber"); }).find("homogeneous, shared-nodes, coupled"), std::string::npos);
+}
+
+TEST(Estimation, FitsCouplingWithinBoundsAndReportsTrainAndValidation)
+{
+    const auto& d = small();
+    const auto train = compression_cases(d.dataset, {"A", "B"});
+    const auto validation = compression_cases(d.dataset, {"D"});
+    EstimationOptions options;
+    options.max_evaluations = 5;
+    options.k_min_n_per_m = 10;
+    options.k_max_n_per_m = 1e4;
+    const auto r = estimate_parameters(d.labels, d.dataset.roles, small_model(ModelVariant::coupled), d.rest, train, validation, options);
+    EXPECT_LE(r.history.size(), 5u);
+    EXPECT_GE(r.history.size(), 3u);
+    for (const double k : {r.fitted.coupling.parenchyma_tumour_n_per_m, r.fitted.coupling.parenchyma_vessel_n_per_m}) {
+        EXPECT_GE(k, 10.0 * (1 - 1e-9));
+        EXPECT_LE(k, 1e4 * (1 + 1e-9));
+    }
+    // The objective is the pooled training TRE at the fitted parameters, and the best seen.
+    EXPECT_NEAR(r.objective_mm, r.train_pooled.all.mean_mm, 1e-12);
+    for (const auto& step : r.history) EXPECT_GE(step.objective_mm, r.objective_mm - 1e-12);
+    EXPECT_EQ(r.train.size(), 2u);
+    EXPECT_EQ(r.validation.size(), 1u);
+    EXPECT_EQ(r.validation_pooled.all.count, d.rest.size());
+    // Bad input: a training compression without landmarks, no training set, an impossible bound.
+    auto empty = train;
+    empty[1].truth.clear();
+    EXPECT_NE(test::error_message([&] { estimate_parameters(d.labels, d.dataset.roles, small_model(ModelVariant::coupled), d.rest, empty, {}, options); })
+                  .find("training compression B has no landmarks"),
+              std::string::npos);
+    EXPECT_NE(test::error_message([&] { estimate_parameters(d.labels, d.dataset.roles, small_model(ModelVariant::coupled), d.rest, {}, {}, options); })
+                  .find("no training compression"),
+              std::string::npos);
+    options.k_min_n_per_m = -1;
+    EXPECT_NE(test::error_message([&] { options.validate(); }).find("bounds"), std::string::npos);
+    EXPECT_NE(test::error_message([&] { compression_cases(d.dataset, {"insufflation"}); }).find("not a tool compression"), std::string::npos);
+    EXPECT_NE(test::error_message([&] { compression_cases(d.dataset, {"Q"}); }).find("no state 'Q'"), std::string::npos);
+}
+
+} // namespace
+} // namespace physreg
