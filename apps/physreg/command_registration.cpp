@@ -41,6 +41,7 @@ std::vector<std::string> split_names(const std::string& text, const std::string&
 struct ModelOptions {
     std::string variant = "coupled", grid;
     std::optional<double> k_tumour, k_vessel, support_radius;
+    double tool_speed = PredictionOptions{}.tool_speed_per_cell;
 };
 
 void add_model_options(CLI::App* sub, ModelOptions& m)
@@ -51,6 +52,16 @@ void add_model_options(CLI::App* sub, ModelOptions& m)
     sub->add_option("--k-tumour", m.k_tumour, "Parenchyma–tumour coupling stiffness k_c,s-t, N/m (default 600, paper 000)");
     sub->add_option("--k-vessel", m.k_vessel, "Parenchyma–vessel coupling stiffness k_c,s-v, N/m (default 500, paper 000)");
     sub->add_option("--support-radius", m.support_radius, "MLS support radius, element sizes (default 1.25)");
+    sub->add_option("--tool-speed", m.tool_speed, "Largest tool travel per relaxation iteration, in cell sizes (default 0.01; lower "
+                                                  "it if elements under the tool invert)");
+}
+
+PredictionOptions prediction_options(const ModelOptions& m)
+{
+    if (!(m.tool_speed > 0 && m.tool_speed <= 0.5)) fail("--tool-speed must lie in (0, 0.5] cell sizes per iteration (got {})", m.tool_speed);
+    PredictionOptions p;
+    p.tool_speed_per_cell = m.tool_speed;
+    return p;
 }
 
 ModelParameters model_parameters(const ModelOptions& m, ModelParameters p)
@@ -128,6 +139,7 @@ void add_subcommand_estimate(CLI::App& app)
         options.k_max_n_per_m = o->k_max;
         options.algorithm = o->algorithm;
         options.max_evaluations = o->max_evaluations;
+        options.prediction = prediction_options(o->model);
         ProgressDisplay bar("estimate");
         const EstimationResult r = estimate_parameters(labels, dataset.roles, initial, rest_landmarks, train, validation, options,
                                                        [&](double f, const std::string& m) { bar.update(f, m); });
@@ -144,6 +156,8 @@ void add_subcommand_estimate(CLI::App& app)
         summary["mesh_fingerprint"] = r.fingerprint;
         summary["train"] = json::parse(tre_stats_json(r.train_pooled));
         if (!r.validation.empty()) summary["validation"] = json::parse(tre_stats_json(r.validation_pooled));
+        summary["baseline_landmarks_at_rest"]["train"] = json::parse(tre_stats_json(r.train_at_rest));
+        if (!r.validation.empty()) summary["baseline_landmarks_at_rest"]["validation"] = json::parse(tre_stats_json(r.validation_at_rest));
         for (const auto& [name, rep] : r.train) summary["per_compression"][name] = json::parse(tre_stats_json(rep));
         for (const auto& [name, rep] : r.validation) summary["per_compression"][name] = json::parse(tre_stats_json(rep));
         const json fit = {{"objective_mm", r.objective_mm}, {"train", summary["train"]}, {"validation", summary.value("validation", json())},
@@ -164,6 +178,9 @@ void add_subcommand_estimate(CLI::App& app)
         std::cerr << fmt::format("  TRAIN        {}\n", tre_line(r.train_pooled));
         for (const auto& [name, rep] : r.validation) std::cerr << fmt::format("  validate {:<3} {}\n", name, tre_line(rep));
         if (!r.validation.empty()) std::cerr << fmt::format("  VALIDATION   {}\n", tre_line(r.validation_pooled));
+        std::cerr << fmt::format("  baseline, landmarks left at rest: train {:.3f} (internal {:.3f}), validation {:.3f} (internal {:.3f}) mm\n",
+                                 r.train_at_rest.all.mean_mm, r.train_at_rest.internal.mean_mm, r.validation_at_rest.all.mean_mm,
+                                 r.validation_at_rest.internal.mean_mm);
         std::cerr << fmt::format("  parameters written to {}\n", o->output);
         if (o->json) std::cout << summary.dump(2) << std::endl;
     });
@@ -213,7 +230,7 @@ void add_subcommand_register_compression(CLI::App& app)
         ProgressDisplay bar("register-compression");
         bar.update(0.05, fmt::format("{} model: {} nodes, {} hexahedra, {} interface points", to_string(p.variant), model.mesh.node_count(),
                                      model.mesh.cell_count(), model.coupling.points().size()));
-        const auto prediction = predict_compression(model, cases[0].tool, rest_landmarks, PredictionOptions{}, "compression " + o->state);
+        const auto prediction = predict_compression(model, cases[0].tool, rest_landmarks, prediction_options(o->model), "compression " + o->state);
         bar.update(0.8, "writing outputs");
         MeshData data;
         data.point_data.push_back({"displacement", 3, prediction.displacement_mm});

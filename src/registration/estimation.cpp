@@ -182,6 +182,13 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
     for (const auto& r : result.validation) v.push_back(r.second);
     result.train_pooled = pool_tre(t);
     if (!v.empty()) result.validation_pooled = pool_tre(v);
+    auto at_rest = [&](const std::vector<CompressionCase>& cases) {
+        std::vector<TreReport> reports;
+        for (const auto& c : cases) reports.push_back(compute_tre(rest_landmarks, c.truth, "compression " + c.name + " (at rest)"));
+        return pool_tre(reports);
+    };
+    result.train_at_rest = at_rest(train);
+    if (!validation.empty()) result.validation_at_rest = at_rest(validation);
     result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return result;
 }

@@ -47,6 +47,8 @@ struct EstimationResult {
     std::vector<EstimationStep> history;
     std::vector<std::pair<std::string, TreReport>> train, validation; ///< per compression, at the fit
     TreReport train_pooled, validation_pooled;
+    /// Baseline: the landmarks left where they are at rest (how far the compressions moved them).
+    TreReport train_at_rest, validation_at_rest;
     double seconds = 0.0;
     std::string optimiser;                   ///< e.g. "NLopt LN_BOBYQA"
     std::string stop_reason;
