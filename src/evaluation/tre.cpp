@@ -127,8 +127,9 @@ RgbImage render_tre_chart(const std::vector<TreSeries>& series, const std::strin
         for (const auto& e : s.report.entries) top = std::max(top, e.error_mm);
     top = std::ceil(top * 1.1);
     const int left = 60, right = 20, head = 50, foot = 70 + 16 * static_cast<int>(series.size());
-    const int group = std::max<int>(12, 6 * static_cast<int>(series.size()) + 4);
-    const int width = std::max(640, left + right + group * static_cast<int>(n)), plot_h = 320, height = head + plot_h + foot;
+    const int min_group = std::max<int>(12, 6 * static_cast<int>(series.size()) + 4);
+    const int width = std::max(640, left + right + min_group * static_cast<int>(n)), plot_h = 320, height = head + plot_h + foot;
+    const int group = std::max(min_group, (width - left - right) / std::max<int>(1, static_cast<int>(n))); // fill the plot
     Canvas c(width, height);
     const Rgb black{0, 0, 0}, grey{200, 200, 200};
     auto y_of = [&](double mm) { return head + plot_h - mm / top * plot_h; };

@@ -117,6 +117,16 @@ ModelParameters read_model_parameters(const std::filesystem::path& path, std::st
 
 namespace {
 
+// The posterior-facing organ surface rests on the phantom's base (as in the ground truth).
+std::vector<char> posterior_support(const VolumeMesh& mesh)
+{
+    std::vector<char> fixed(mesh.node_count(), 0);
+    for (const auto& f : boundary_faces(mesh))
+        if (f.normal.y() > 0.5)
+            for (int a = 0; a < f.count; ++a) fixed[static_cast<std::size_t>(f.nodes[a])] = 1;
+    return fixed;
+}
+
 std::string mesh_fingerprint(const VolumeMesh& mesh)
 {
     // FNV-1a over node positions (to 1e-6 mm), connectivity and labels.
@@ -173,11 +183,7 @@ LiverModel build_liver_model(const LabelVolume& rest_labels, const LabelRoles& r
     VolumeMesh grid_mesh = mesh_label_volume(rest_labels, model.tissues, meshing, what).mesh;
     model.fingerprint = mesh_fingerprint(grid_mesh);
     model.cell_size_mm = grid_mesh.grid->cell_size;
-    // Support: the posterior-facing organ surface rests on the phantom's base (as in the ground truth).
-    std::vector<char> fixed_vertex(grid_mesh.node_count(), 0);
-    for (const auto& f : boundary_faces(grid_mesh))
-        if (f.normal.y() > 0.5)
-            for (int a = 0; a < f.count; ++a) fixed_vertex[static_cast<std::size_t>(f.nodes[a])] = 1;
+    const std::vector<char> fixed_vertex = posterior_support(grid_mesh);
     if (parameters.variant == ModelVariant::coupled) {
         CouplingOptions options;
         options.support_radius_cells = parameters.support_radius_cells;
@@ -194,6 +200,28 @@ LiverModel build_liver_model(const LabelVolume& rest_labels, const LabelRoles& r
         if (fixed_vertex[static_cast<std::size_t>(model.original_vertex[n])]) model.fixed_nodes.push_back(static_cast<std::int32_t>(n));
     if (model.fixed_nodes.empty()) fail("{}: the liver has no posterior-facing surface to rest on", what);
     model.tled = std::make_unique<TledModel>(model.mesh, model.tissues, TledOptions{});
+    return model;
+}
+
+LiverModel coarsen_liver_model(const LiverModel& fine, const Index3& grid, std::vector<NodeEmbedding>* fine_nodes)
+{
+    CoarseningResult coarse = coarsen(fine.mesh, grid, ComponentPolicy::keep_all);
+    LiverModel model;
+    model.parameters = fine.parameters;
+    model.parameters.variant = ModelVariant::shared_nodes;
+    model.parameters.grid = grid;
+    model.tissues = fine.tissues;
+    model.mesh = std::move(coarse.mesh);
+    model.fingerprint = mesh_fingerprint(model.mesh);
+    model.cell_size_mm = model.mesh.grid->cell_size;
+    model.original_vertex.resize(model.mesh.node_count());
+    std::iota(model.original_vertex.begin(), model.original_vertex.end(), 0);
+    const std::vector<char> fixed = posterior_support(model.mesh);
+    for (std::size_t n = 0; n < fixed.size(); ++n)
+        if (fixed[n]) model.fixed_nodes.push_back(static_cast<std::int32_t>(n));
+    if (model.fixed_nodes.empty()) fail("coarse model: the liver has no posterior-facing surface to rest on");
+    model.tled = std::make_unique<TledModel>(model.mesh, model.tissues, TledOptions{});
+    if (fine_nodes) *fine_nodes = std::move(coarse.fine_nodes);
     return model;
 }
 

@@ -12,6 +12,7 @@
 #include "physreg/mechanics/loads.hpp"
 #include "physreg/mechanics/tissue_coupling.hpp"
 #include "physreg/mechanics/tled_solver.hpp"
+#include "physreg/mesh/coarsen.hpp"
 #include "physreg/phantom/abdominal_phantom.hpp"
 
 #include <filesystem>
@@ -61,6 +62,12 @@ struct LiverModel {
 /// Meshes the liver-role labels of `rest_labels`; `what` names the input in messages.
 LiverModel build_liver_model(const LabelVolume& rest_labels, const LabelRoles& roles, const ModelParameters& parameters,
                              const std::string& what);
+
+/// Paper 000's low-resolution model: `fine`'s mesh coarsened to `grid` cells (e.g. 24 × 18 × 18) by
+/// the majority rule over fine cells, tissues directly connected (shared nodes, no coupling),
+/// per-tissue moduli as in `fine`, the same posterior support. `fine_nodes` receives every fine
+/// node's coarse cell and natural coordinates (rest).
+LiverModel coarsen_liver_model(const LiverModel& fine, const Index3& grid, std::vector<NodeEmbedding>* fine_nodes = nullptr);
 
 struct PredictionOptions {
     EquilibriumOptions equilibrium = default_equilibrium();
