@@ -14,4 +14,5 @@ find_package(ZLIB REQUIRED)
 find_package(ITK 5.2 REQUIRED COMPONENTS
   ITKCommon ITKIOImageBase ITKIONIFTI ITKIONRRD ITKIOMeta ITKIOGDCM ITKIOPNG)
 find_package(pugixml REQUIRED)
+find_package(MPI REQUIRED COMPONENTS CXX) # OpenMPI: enrichment database builds across processes and machines
 find_package(NLopt 2.7 REQUIRED) # derivative-free optimisation (BOBYQA, Nelder–Mead): parameter estimation

@@ -12,6 +12,7 @@ packages=(
   libspdlog-dev libfmt-dev # logging, formatting
   libpugixml-dev           # VTU (XML) reading
   libnlopt-cxx-dev         # BOBYQA / Nelder–Mead: parameter estimation
+  libopenmpi-dev openmpi-bin # enrichment database builds across processes (mpirun)
   zlib1g-dev               # compressed VTU arrays
   libgtest-dev libgmock-dev libbenchmark-dev
 )

@@ -111,9 +111,9 @@ void EnrichmentDatabase::validate(const std::string& what) const
     }
 }
 
-void write_enrichment_database(const std::filesystem::path& path, const EnrichmentDatabase& db)
+std::string serialize_enrichment_database(const EnrichmentDatabase& db)
 {
-    db.validate("enrichment database '" + path.string() + "'");
+    db.validate("enrichment database");
     json header;
     header["fine_fingerprint"] = db.fine_fingerprint;
     header["coarse_fingerprint"] = db.coarse_fingerprint;
@@ -121,35 +121,44 @@ void write_enrichment_database(const std::filesystem::path& path, const Enrichme
     header["fine_nodes"] = db.fine_nodes;
     header["coarse_nodes"] = db.coarse_nodes;
     header["units"] = "mm; weights dimensionless (float32); coarse displacement float32 mm";
+    header["conditions"] = json::array();
     for (const auto& c : db.conditions)
         header["conditions"].push_back({{"position", c.position},
                                         {"contact_mm", {c.contact_mm.x(), c.contact_mm.y(), c.contact_mm.z()}},
                                         {"direction", {c.direction.x(), c.direction.y(), c.direction.z()}},
                                         {"depth_mm", c.depth_mm}});
-    if (db.conditions.empty()) header["conditions"] = json::array();
     const std::string text = header.dump();
+    std::string out;
+    std::uint32_t whole = 0;
+    auto put = [&](const void* data, std::size_t bytes) {
+        out.append(static_cast<const char*>(data), bytes);
+        whole = crc(data, bytes, whole);
+    };
+    put(magic, sizeof magic);
+    put(&format_version, sizeof format_version);
+    const std::uint64_t header_bytes = text.size();
+    put(&header_bytes, sizeof header_bytes);
+    put(text.data(), text.size());
+    for (std::size_t t = 0; t < db.conditions.size(); ++t) {
+        const auto& u = db.coarse_displacement[t];
+        const auto& w = db.weights[t];
+        const std::uint32_t block = crc(w.data(), w.size() * sizeof(float), crc(u.data(), u.size() * sizeof(float)));
+        put(u.data(), u.size() * sizeof(float));
+        put(w.data(), w.size() * sizeof(float));
+        put(&block, sizeof block);
+    }
+    put(end_magic, sizeof end_magic);
+    out.append(reinterpret_cast<const char*>(&whole), sizeof whole);
+    return out;
+}
+
+void write_enrichment_database(const std::filesystem::path& path, const EnrichmentDatabase& db)
+{
+    db.validate("enrichment database '" + path.string() + "'");
+    const std::string bytes = serialize_enrichment_database(db);
     write_atomically(path, [&](const std::filesystem::path& tmp) {
         std::ofstream out(tmp, std::ios::binary);
-        std::uint32_t whole = 0;
-        auto put = [&](const void* data, std::size_t bytes) {
-            out.write(static_cast<const char*>(data), static_cast<std::streamsize>(bytes));
-            whole = crc(data, bytes, whole);
-        };
-        put(magic, sizeof magic);
-        put(&format_version, sizeof format_version);
-        const std::uint64_t header_bytes = text.size();
-        put(&header_bytes, sizeof header_bytes);
-        put(text.data(), text.size());
-        for (std::size_t t = 0; t < db.conditions.size(); ++t) {
-            const auto& u = db.coarse_displacement[t];
-            const auto& w = db.weights[t];
-            const std::uint32_t block = crc(w.data(), w.size() * sizeof(float), crc(u.data(), u.size() * sizeof(float)));
-            put(u.data(), u.size() * sizeof(float));
-            put(w.data(), w.size() * sizeof(float));
-            put(&block, sizeof block);
-        }
-        put(end_magic, sizeof end_magic);
-        out.write(reinterpret_cast<const char*>(&whole), sizeof whole);
+        out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
         if (!out) fail("cannot write enrichment database '{}'", path.string());
     });
 }
@@ -158,26 +167,30 @@ EnrichmentDatabase read_enrichment_database(const std::filesystem::path& path)
 {
     std::ifstream in(path, std::ios::binary);
     if (!in) fail("enrichment database '{}': cannot open", path.string());
-    const std::string name = path.string();
-    const auto file_bytes = std::filesystem::file_size(path);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    return deserialize_enrichment_database(bytes, "enrichment database '" + path.string() + "'");
+}
+
+EnrichmentDatabase deserialize_enrichment_database(const std::string& bytes, const std::string& name)
+{
+    const std::uint64_t file_bytes = bytes.size();
     std::uint32_t whole = 0;
     std::uint64_t consumed = 0;
-    auto get = [&](void* data, std::size_t bytes, const char* what) {
-        if (consumed + bytes > file_bytes) fail("enrichment database '{}': truncated ({} bytes; ended inside the {})", name, file_bytes, what);
-        in.read(static_cast<char*>(data), static_cast<std::streamsize>(bytes));
-        if (!in) fail("enrichment database '{}': read error in the {}", name, what);
-        consumed += bytes;
-        whole = crc(data, bytes, whole);
+    auto get = [&](void* data, std::size_t n, const char* what) {
+        if (consumed + n > file_bytes) fail("{}: truncated ({} bytes; ended inside the {})", name, file_bytes, what);
+        std::memcpy(data, bytes.data() + consumed, n);
+        consumed += n;
+        whole = crc(data, n, whole);
     };
     char m[8];
     get(m, sizeof m, "magic");
-    if (std::memcmp(m, magic, sizeof m) != 0) fail("enrichment database '{}': not a physreg enrichment database (bad magic)", name);
+    if (std::memcmp(m, magic, sizeof m) != 0) fail("{}: not a physreg enrichment database (bad magic)", name);
     std::uint32_t version = 0;
     get(&version, sizeof version, "version");
-    if (version != format_version) fail("enrichment database '{}': format version {} (this physreg reads {})", name, version, format_version);
+    if (version != format_version) fail("{}: format version {} (this physreg reads {})", name, version, format_version);
     std::uint64_t header_bytes = 0;
     get(&header_bytes, sizeof header_bytes, "header size");
-    if (header_bytes > file_bytes) fail("enrichment database '{}': truncated or corrupt header size ({} bytes)", name, header_bytes);
+    if (header_bytes > file_bytes) fail("{}: truncated or corrupt header size ({} bytes)", name, header_bytes);
     std::string text(header_bytes, '\0');
     get(text.data(), text.size(), "header");
     EnrichmentDatabase db;
@@ -190,16 +203,16 @@ EnrichmentDatabase read_enrichment_database(const std::filesystem::path& path)
         db.coarse_nodes = h.at("coarse_nodes").get<std::uint64_t>();
         for (const auto& c : h.at("conditions")) {
             const auto p = c.at("contact_mm").get<std::vector<double>>(), d = c.at("direction").get<std::vector<double>>();
-            if (p.size() != 3 || d.size() != 3) fail("enrichment database '{}': a condition's vectors need 3 values", name);
+            if (p.size() != 3 || d.size() != 3) fail("{}: a condition's vectors need 3 values", name);
             db.conditions.push_back({c.at("position").get<std::string>(), Vec3(p[0], p[1], p[2]), Vec3(d[0], d[1], d[2]), c.at("depth_mm").get<double>()});
         }
     } catch (const json::exception& e) {
-        fail("enrichment database '{}': corrupt header: {}", name, e.what());
+        fail("{}: corrupt header: {}", name, e.what());
     }
     const std::uint64_t block_bytes = (3 * db.coarse_nodes + 8 * db.fine_nodes) * sizeof(float) + sizeof(std::uint32_t);
     const std::uint64_t expected = consumed + block_bytes * db.conditions.size() + sizeof end_magic + sizeof(std::uint32_t);
     if (file_bytes != expected)
-        fail("enrichment database '{}': {} bytes, expected {} for {} conditions ({})", name, file_bytes, expected, db.conditions.size(),
+        fail("{}: {} bytes, expected {} for {} conditions ({})", name, file_bytes, expected, db.conditions.size(),
              file_bytes < expected ? "truncated" : "trailing data");
     for (std::size_t t = 0; t < db.conditions.size(); ++t) {
         std::vector<float> u(3 * db.coarse_nodes), w(8 * db.fine_nodes);
@@ -209,19 +222,18 @@ EnrichmentDatabase read_enrichment_database(const std::filesystem::path& path)
         get(&stored, sizeof stored, "block checksum");
         const std::uint32_t actual = crc(w.data(), w.size() * sizeof(float), crc(u.data(), u.size() * sizeof(float)));
         if (stored != actual)
-            fail("enrichment database '{}': checksum mismatch in condition {} ({} {:.2f} mm): the file is corrupt", name, t,
-                 db.conditions[t].position, db.conditions[t].depth_mm);
+            fail("{}: checksum mismatch in condition {} ({} {:.2f} mm): the file is corrupt", name, t, db.conditions[t].position,
+                 db.conditions[t].depth_mm);
         db.coarse_displacement.push_back(std::move(u));
         db.weights.push_back(std::move(w));
     }
     char e[8];
     get(e, sizeof e, "end marker");
-    const std::uint32_t before = whole;
     std::uint32_t stored_whole = 0;
-    in.read(reinterpret_cast<char*>(&stored_whole), sizeof stored_whole);
-    if (std::memcmp(e, end_magic, sizeof e) != 0 || stored_whole != before)
-        fail("enrichment database '{}': checksum mismatch in the header or end marker: the file is corrupt", name);
-    db.validate("enrichment database '" + name + "'");
+    std::memcpy(&stored_whole, bytes.data() + consumed, sizeof stored_whole);
+    if (std::memcmp(e, end_magic, sizeof e) != 0 || stored_whole != whole)
+        fail("{}: checksum mismatch in the header or end marker: the file is corrupt", name);
+    db.validate(name);
     return db;
 }
 

@@ -15,8 +15,10 @@
 #include "physreg/core/types.hpp"
 #include "physreg/mesh/coarsen.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
+#include "physreg/registration/liver_model.hpp"
 
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -50,6 +52,100 @@ struct EnrichmentDatabase {
     std::vector<std::vector<float>> coarse_displacement, weights;
     void validate(const std::string& what) const; ///< sizes consistent, values finite
 };
+
+/// Which conditions a database holds: positions × orientations × depths (paper 000: 5 × 20 × 50).
+struct EnrichmentPlan {
+    struct Position {
+        std::string name;
+        Vec3 contact_mm;                    ///< where the tool first meets the organ
+    };
+    std::vector<Position> positions;
+    Vec3 direction = Vec3::UnitY();         ///< nominal pressing direction (LPS; posterior)
+    int orientations = 1;                   ///< 1: the nominal direction only; else also tilted ones
+    double tilt_deg = 15.0;                 ///< tilt of the other orientations (on a cone, equal azimuths)
+    std::vector<double> depths_mm;          ///< increasing, > 0
+    void validate() const;
+    std::size_t sequences() const { return positions.size() * static_cast<std::size_t>(orientations); }
+    /// Unit pressing direction of orientation o (0: nominal).
+    Vec3 orientation(int o) const;
+    /// All conditions: position-major, then orientation, then depth (the database's order).
+    std::vector<EnrichmentCondition> conditions() const;
+};
+
+/// The tool path of a condition: from two coarse cells back along the direction to the depth.
+Indenter condition_tool(const Indenter& shape, const EnrichmentCondition& condition, double back_mm);
+
+struct EnrichmentBuildOptions {
+    PredictionOptions prediction;
+    /// Finished sequences (one position and orientation through all depths) are saved here and
+    /// reused when the build is run again (resume). Empty: no checkpoints.
+    std::filesystem::path checkpoint_directory;
+    int rank = 0, ranks = 1;                ///< MPI: this process does sequences s with s % ranks == rank
+    std::function<void(double, const std::string&)> progress;
+};
+
+/// Deforms the fine and the coarse model under every condition of `plan` (sequences in parallel on
+/// threads; depths of a sequence warm-started from each other) and stores the eq. 9 weights. With
+/// ranks > 1 it returns only this rank's sequences (conditions of the others are left out); merge
+/// with merge_enrichment_parts. Deterministic: the same database whatever the thread or rank count.
+EnrichmentDatabase build_enrichment_database(const LiverModel& fine, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
+                                             const Indenter& tool_shape, const EnrichmentPlan& plan, const EnrichmentBuildOptions& options);
+
+/// Puts the parts built by several ranks together in the plan's order. Throws Error for a missing
+/// or duplicated condition, or parts built for other meshes.
+EnrichmentDatabase merge_enrichment_parts(const std::vector<EnrichmentDatabase>& parts, const EnrichmentPlan& plan);
+
+/// The file format in memory (for MPI messages): what write/read put in and take from the file.
+std::string serialize_enrichment_database(const EnrichmentDatabase& database);
+EnrichmentDatabase deserialize_enrichment_database(const std::string& bytes, const std::string& what);
+
+/// Choosing stored conditions for a new deformation (paper 000: by compression parameters).
+enum class EnrichmentMatching {
+    parameters, ///< tool entry point, direction and depth (needs the tool's parameters)
+    field       ///< similarity of the coarse displacement field (works without the tool's parameters)
+};
+EnrichmentMatching parse_enrichment_matching(const std::string& text);
+
+struct EnrichmentMatch {
+    std::vector<std::size_t> conditions; ///< the k nearest, nearest first
+    std::vector<double> distances;       ///< parameters: mm (|Δ contact| + |Δ depth| + 10 mm/rad × angle); field: RMS mm
+    std::vector<double> blend;           ///< inverse-distance weights, Σ = 1
+    bool outside_range = false;          ///< the query lies beyond the database's conditions: extrapolated
+    std::string range_note;              ///< how far outside, for the warning
+};
+
+/// Parameter distance between conditions, mm (10 mm per radian of direction change).
+double condition_distance(const EnrichmentCondition& a, const EnrichmentCondition& b);
+/// The k nearest conditions. `query` is needed for parameter matching (and checks the range);
+/// `coarse_u` (3 per coarse node) for field matching.
+EnrichmentMatch match_enrichment(const EnrichmentDatabase& db, EnrichmentMatching how, int k, const EnrichmentCondition* query,
+                                 const std::vector<double>& coarse_u);
+/// Σ_m blend_m Φ_m over the matched conditions (partition of unity kept).
+std::vector<float> blended_weights(const EnrichmentDatabase& db, const EnrichmentMatch& match);
+/// The blend size with the lowest leave-one-out error over the database (each stored condition
+/// predicted from the others by field matching, its own fine nodes as the truth), among 1…max_k.
+/// Returns k and the error per k (mean fine-node error, mm) in `errors_mm`.
+int choose_blend_size(const EnrichmentDatabase& db, const VolumeMesh& coarse, const std::vector<NodeEmbedding>& fine_nodes,
+                      const std::vector<Vec3>& fine_rest, int max_k, std::vector<double>* errors_mm = nullptr);
+
+/// Throws Error naming `what` when the database was built for another fine or coarse mesh, or for
+/// other model parameters (tissue moduli, coupling).
+void check_database_fits(const EnrichmentDatabase& db, const LiverModel& fine, const LiverModel& coarse, const std::string& what);
+/// The fine model's parameters as the database records them.
+std::string enrichment_model_json(const LiverModel& fine, const LiverModel& coarse);
+
+/// Coarse-to-fine prediction of a compression: the coarse model solved for the tool, the stored
+/// conditions matched, every fine node synthesised (eq. 10), landmarks moved in the fine mesh.
+struct CoarseToFinePrediction {
+    std::vector<double> coarse_u, fine_u;   ///< mm
+    LandmarkSet landmarks;
+    EnrichmentMatch match;
+    long iterations = 0;                    ///< coarse relaxation
+    double coarse_seconds = 0.0, synthesis_seconds = 0.0;
+};
+CoarseToFinePrediction predict_coarse_to_fine(const LiverModel& fine, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
+                                              const EnrichmentDatabase& db, const Indenter& tool, const LandmarkSet& rest_landmarks,
+                                              EnrichmentMatching how, int k, const PredictionOptions& options, const std::string& what);
 
 /// Atomic write (temporary name, then rename).
 void write_enrichment_database(const std::filesystem::path& path, const EnrichmentDatabase& database);

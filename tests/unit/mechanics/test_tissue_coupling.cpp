@@ -175,6 +175,15 @@ TEST(TissueCoupling, BadStiffnessIsRefusedNamingTheParameter)
     EXPECT_NE(test::error_message([&] { split_tissue_interfaces(block.mesh, missing, {}, {}); }).find("label 2"), std::string::npos);
 }
 
+EquilibriumOptions tight()
+{
+    EquilibriumOptions o;
+    o.displacement_tolerance_mm = 1e-7;
+    o.residual_tolerance = 1e-7;
+    o.max_iterations = 400000;
+    return o;
+}
+
 // Largest distance between the coupled model's parenchyma copies and the shared-node model's nodes.
 double difference_to_shared(const Inclusion& block, const std::vector<double>& shared_u, double k_n_per_m, double& largest,
                             double radius = CouplingOptions{}.support_radius_cells)
@@ -187,11 +196,7 @@ double difference_to_shared(const Inclusion& block, const std::vector<double>& s
     TledSolver<double> solver(model);
     solver.set_coupling(&split.coupling);
     solver.set_loads(block.loads(split.mesh, 0.5));
-    EquilibriumOptions o;
-    o.displacement_tolerance_mm = 1e-7;
-    o.residual_tolerance = 1e-7;
-    o.max_iterations = 400000;
-    const auto summary = solver.solve_equilibrium(o);
+    const auto summary = solver.solve_equilibrium(tight());
     EXPECT_TRUE(summary.converged()) << summary.message;
     const auto u = solver.displacement_mm();
     double diff = 0.0;
@@ -211,11 +216,7 @@ TEST(TissueCoupling, StiffCouplingApproachesTheSharedNodeModel)
     const TledModel shared_model(block.mesh, block.tissues, {});
     TledSolver<double> shared(shared_model);
     shared.set_loads(block.loads(block.mesh, 0.5));
-    EquilibriumOptions o;
-    o.displacement_tolerance_mm = 1e-7;
-    o.residual_tolerance = 1e-7;
-    o.max_iterations = 400000;
-    ASSERT_TRUE(shared.solve_equilibrium(o).converged());
+    ASSERT_TRUE(shared.solve_equilibrium(tight()).converged());
     const auto shared_u = shared.displacement_mm();
     double largest = 0.0;
     // k = 1e6 N/m (1000 N/mm, ≈ 5000× a 1 mm parenchyma element's stiffness E·h = 0.2 N/mm), default

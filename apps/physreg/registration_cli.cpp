@@ -1,0 +1,99 @@
+// Options and helpers shared by the commands that build the liver model.
+#include "registration_cli.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/io/image_io.hpp"
+#include "physreg/io/landmarks_io.hpp"
+#include "physreg/mesh/hex_meshing.hpp"
+
+#include <sstream>
+
+namespace physreg::cli {
+using nlohmann::json;
+
+std::vector<std::string> split_names(const std::string& text, const std::string& option)
+{
+    std::vector<std::string> names;
+    std::stringstream in(text);
+    std::string item;
+    while (std::getline(in, item, ','))
+        if (!item.empty()) names.push_back(item);
+    if (names.empty()) fail("{}: no state names in '{}'", option, text);
+    return names;
+}
+
+void add_model_options(CLI::App* sub, ModelOptions& m)
+{
+    sub->add_option("--variant", m.variant, "Model: homogeneous (Han et al.), shared-nodes (per-element materials) or coupled (MLS "
+                                            "penalty coupling, paper 000; default)");
+    sub->add_option("--grid", m.grid, "Cells over the liver's bounding box per image axis (default 74x54x18)");
+    sub->add_option("--k-tumour", m.k_tumour, "Parenchyma–tumour coupling stiffness k_c,s-t, N/m (default 600, paper 000)");
+    sub->add_option("--k-vessel", m.k_vessel, "Parenchyma–vessel coupling stiffness k_c,s-v, N/m (default 500, paper 000)");
+    sub->add_option("--support-radius", m.support_radius, "MLS support radius, element sizes (default 1.25)");
+    sub->add_option("--tool-speed", m.tool_speed, "Largest tool travel per relaxation iteration, in cell sizes (default 0.01; lower "
+                                                  "it if elements under the tool invert)");
+}
+
+PredictionOptions prediction_options(const ModelOptions& m)
+{
+    if (!(m.tool_speed > 0 && m.tool_speed <= 0.5)) fail("--tool-speed must lie in (0, 0.5] cell sizes per iteration (got {})", m.tool_speed);
+    PredictionOptions p;
+    p.tool_speed_per_cell = m.tool_speed;
+    return p;
+}
+
+ModelParameters model_parameters(const ModelOptions& m, ModelParameters p)
+{
+    p.variant = parse_model_variant(m.variant);
+    if (!m.grid.empty()) p.grid = parse_grid_dims(m.grid, "--grid");
+    if (m.k_tumour) p.coupling.parenchyma_tumour_n_per_m = *m.k_tumour;
+    if (m.k_vessel) p.coupling.parenchyma_vessel_n_per_m = *m.k_vessel;
+    if (m.support_radius) p.support_radius_cells = *m.support_radius;
+    try {
+        p.validate();
+    } catch (const Error& e) {
+        fail("model parameters: {}", e.what());
+    }
+    return p;
+}
+
+json parameters_json(const ModelParameters& p)
+{
+    return {{"variant", to_string(p.variant)},
+            {"k_c_s_t_n_per_m", p.coupling.parenchyma_tumour_n_per_m},
+            {"k_c_s_v_n_per_m", p.coupling.parenchyma_vessel_n_per_m},
+            {"young_modulus_pa", {{"parenchyma", p.parenchyma_young_pa}, {"tumour", p.tumour_young_pa}, {"vessel", p.vessel_young_pa}}},
+            {"grid_cells", {p.grid[0], p.grid[1], p.grid[2]}}};
+}
+
+std::string tre_line(const TreReport& r)
+{
+    return fmt::format("all {:.3f} ± {:.3f} (max {:.3f}) | surface {:.3f} | internal {:.3f} (tumour {:.3f}, vessel {:.3f}) mm", r.all.mean_mm,
+                       r.all.std_mm, r.all.max_mm, r.surface.mean_mm, r.internal.mean_mm, r.tumour.mean_mm, r.vessel.mean_mm);
+}
+
+
+LoadedModel load_model(const std::string& dataset, const std::string& parameters_file, const ModelOptions& options)
+{
+    LoadedModel out;
+    out.dataset = read_phantom_dataset(dataset);
+    const DatasetState& rest = out.dataset.state("rest");
+    out.labels = read_label_volume(out.dataset.path(rest.files.at("labels")));
+    out.rest_landmarks = read_landmarks(out.dataset.path(rest.files.at("landmarks")));
+    ModelParameters p;
+    std::string fingerprint;
+    if (!parameters_file.empty()) {
+        p = read_model_parameters(parameters_file, &fingerprint);
+        if (options.variant != "coupled" || !options.grid.empty() || options.k_tumour || options.k_vessel)
+            fail("--parameters: the model comes from the parameter file; drop --variant/--grid/--k-tumour/--k-vessel");
+    } else {
+        p = model_parameters(options, p);
+    }
+    out.model = build_liver_model(out.labels, out.dataset.roles, p, out.dataset.path(rest.files.at("labels")).string());
+    if (!fingerprint.empty() && fingerprint != out.model.fingerprint)
+        fail("--parameters '{}': fitted on another mesh (fingerprint {}, this dataset's model {}); estimate again for this dataset",
+             parameters_file, fingerprint, out.model.fingerprint);
+    return out;
+}
+
+} // namespace physreg::cli

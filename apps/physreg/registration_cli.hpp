@@ -1,0 +1,41 @@
+#pragma once
+// Options and helpers shared by the commands that build the liver model (estimate,
+// register-compression, enrich).
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "physreg/evaluation/tre.hpp"
+#include "physreg/phantom/dataset.hpp"
+#include "physreg/registration/liver_model.hpp"
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace physreg::cli {
+
+/// "A,B,C" → {"A", "B", "C"}; Error naming `option` when empty.
+std::vector<std::string> split_names(const std::string& text, const std::string& option);
+
+struct ModelOptions {
+    std::string variant = "coupled", grid;
+    std::optional<double> k_tumour, k_vessel, support_radius;
+    double tool_speed = PredictionOptions{}.tool_speed_per_cell;
+};
+void add_model_options(CLI::App* sub, ModelOptions& m);
+ModelParameters model_parameters(const ModelOptions& m, ModelParameters p);
+PredictionOptions prediction_options(const ModelOptions& m);
+nlohmann::json parameters_json(const ModelParameters& p);
+std::string tre_line(const TreReport& r);
+
+/// The dataset's rest state and the model: from `parameters_file` (checked against the mesh it
+/// builds: "fitted on another mesh") or from the model options.
+struct LoadedModel {
+    PhantomDataset dataset;
+    LabelVolume labels;
+    LandmarkSet rest_landmarks;
+    LiverModel model;
+};
+LoadedModel load_model(const std::string& dataset, const std::string& parameters_file, const ModelOptions& options);
+
+} // namespace physreg::cli
