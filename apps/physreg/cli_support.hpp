@@ -29,6 +29,7 @@ void add_subcommand_estimate(CLI::App& app);
 void add_subcommand_register_compression(CLI::App& app);
 void add_subcommand_evaluate(CLI::App& app);
 void add_subcommand_enrich(CLI::App& app);
+void add_subcommand_bench(CLI::App& app);
 
 nlohmann::json to_json(const ImageGeometry& geometry);
 nlohmann::json to_json(const HexGrid& grid);

@@ -27,6 +27,7 @@ int main(int argc, char** argv)
     physreg::cli::add_subcommand_register_compression(app);
     physreg::cli::add_subcommand_evaluate(app);
     physreg::cli::add_subcommand_enrich(app);
+    physreg::cli::add_subcommand_bench(app);
     physreg::cli::add_subcommand_demo(app);
     app.parse_complete_callback([&] { physreg::logger()->set_level(spdlog::level::from_str(log_level)); });
     try {

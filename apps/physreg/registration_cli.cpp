@@ -32,13 +32,19 @@ void add_model_options(CLI::App* sub, ModelOptions& m)
     sub->add_option("--support-radius", m.support_radius, "MLS support radius, element sizes (default 1.25)");
     sub->add_option("--tool-speed", m.tool_speed, "Largest tool travel per relaxation iteration, in cell sizes (default 0.01; lower "
                                                   "it if elements under the tool invert)");
+    sub->add_option("--tolerance", m.tolerance_mm, "Equilibrium: estimated distance to equilibrium, mm (default 1e-3)");
+    sub->add_option("--residual", m.residual, "Equilibrium: largest free residual / largest internal force (default 1e-3)");
 }
 
 PredictionOptions prediction_options(const ModelOptions& m)
 {
     if (!(m.tool_speed > 0 && m.tool_speed <= 0.5)) fail("--tool-speed must lie in (0, 0.5] cell sizes per iteration (got {})", m.tool_speed);
+    if (!(m.tolerance_mm > 0 && m.tolerance_mm <= 1.0)) fail("--tolerance must lie in (0, 1] mm (got {})", m.tolerance_mm);
+    if (!(m.residual > 0 && m.residual < 1.0)) fail("--residual must lie in (0, 1) (got {})", m.residual);
     PredictionOptions p;
     p.tool_speed_per_cell = m.tool_speed;
+    p.equilibrium.displacement_tolerance_mm = m.tolerance_mm;
+    p.equilibrium.residual_tolerance = m.residual;
     return p;
 }
 

@@ -21,6 +21,8 @@ struct ModelOptions {
     std::string variant = "coupled", grid;
     std::optional<double> k_tumour, k_vessel, support_radius;
     double tool_speed = PredictionOptions{}.tool_speed_per_cell;
+    double tolerance_mm = PredictionOptions{}.equilibrium.displacement_tolerance_mm;
+    double residual = PredictionOptions{}.equilibrium.residual_tolerance;
 };
 void add_model_options(CLI::App* sub, ModelOptions& m);
 ModelParameters model_parameters(const ModelOptions& m, ModelParameters p);

@@ -297,4 +297,57 @@ CompressionPrediction predict_compression(const LiverModel& model, const Indente
     return out;
 }
 
+CompressionTracker::CompressionTracker(const LiverModel& model, const Indenter& tool, const PredictionOptions& options)
+    : m_model(model), m_tool(tool), m_options(options), m_solver(*model.tled)
+{
+    if (tool.path.size() < 2) fail("tracker: the tool needs a path from first contact onwards");
+    const Vec3 d = (tool.path.back() - tool.path.front()).normalized();
+    m_position = tool.path.front() - 2.0 * model.cell_size_mm.maxCoeff() * d;
+    m_tool.path = {m_position};
+    m_solver.set_coupling(model.coupling.empty() ? nullptr : &model.coupling);
+}
+
+CompressionTracker::Update CompressionTracker::move_to(const Vec3& position, const std::string& what)
+{
+    // The tool moves from where it was (load factor 0) to the new position (1); the solver's state
+    // is the previous equilibrium.
+    Indenter tool = m_tool;
+    tool.path = {m_position, position};
+    Loads loads;
+    loads.constraints.push_back({"posterior_support", m_model.fixed_nodes, {true, true, true}, Vec3::Zero()});
+    loads.indenters.push_back(tool);
+    m_solver.set_loads(loads);
+    m_solver.reset_load_factor();
+    EquilibriumOptions o = m_options.equilibrium;
+    const double travel = (position - m_position).norm();
+    const std::vector<double> current = m_solver.displacement_mm();
+    if (!m_previous.empty() && m_previous_travel > 0) {
+        std::vector<double> guess(current.size());
+        const double ratio = travel / m_previous_travel;
+        for (std::size_t k = 0; k < guess.size(); ++k) guess[k] = current[k] + ratio * (current[k] - m_previous[k]);
+        m_solver.set_displacement(guess);
+    }
+    o.ramp_iterations = std::max<long>(1, std::lround(std::ceil(1.875 * travel / (m_options.tool_speed_per_cell * m_model.cell_size_mm.minCoeff()))));
+    const auto t0 = std::chrono::steady_clock::now();
+    SolveSummary s;
+    try {
+        s = m_solver.solve_equilibrium(o, 1.0);
+    } catch (const Error& e) {
+        if (m_previous.empty()) fail("{}: {}", what, e.what());
+        // The extrapolated guess folded an element: start from the last equilibrium instead.
+        m_solver.set_displacement(current);
+        m_solver.reset_load_factor();
+        try {
+            s = m_solver.solve_equilibrium(o, 1.0);
+        } catch (const Error& again) {
+            fail("{}: {}", what, again.what());
+        }
+    }
+    if (!s.converged()) fail("{}: {}", what, s.message);
+    m_previous = current;
+    m_previous_travel = travel;
+    m_position = position;
+    return {s.iterations, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()};
+}
+
 } // namespace physreg

@@ -83,6 +83,9 @@ public:
 
     /// Resets displacement, velocity and time to zero.
     void reset();
+    /// Keeps the displacement but makes the next solve_equilibrium ramp its loads from load factor 0
+    /// (e.g. after set_loads with a tool path that starts where the previous one ended).
+    void reset_load_factor() { m_load_factor = 0.0; }
     void set_displacement(const std::vector<double>& u_mm);
     std::vector<double> displacement_mm() const;
     /// Internal nodal forces F(u) at the current displacement, N (3 per node).

@@ -92,6 +92,32 @@ struct CompressionPrediction {
 CompressionPrediction predict_compression(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks,
                                           const PredictionOptions& options, const std::string& what);
 
+/// Follows a tool through a sequence of positions, each equilibrium warm-started from the previous
+/// one (the run-time use: a new tracked tool position → the organ at equilibrium).
+class CompressionTracker {
+public:
+    /// `tool`: shape and first-contact position (path.front()); it starts two cells back.
+    CompressionTracker(const LiverModel& model, const Indenter& tool, const PredictionOptions& options);
+    struct Update {
+        long iterations = 0;
+        double seconds = 0.0;
+    };
+    /// Moves the tool's reference point to `position_mm` and relaxes to equilibrium, starting from
+    /// the last equilibrium extrapolated linearly along the tool's motion (the previous update's
+    /// increment, scaled by the travel), which tracking a steadily moving tool makes a close guess.
+    Update move_to(const Vec3& position_mm, const std::string& what);
+    std::vector<double> displacement_mm() const { return m_solver.displacement_mm(); }
+
+private:
+    const LiverModel& m_model;
+    Indenter m_tool;
+    PredictionOptions m_options;
+    TledSolver<double> m_solver;
+    Vec3 m_position;
+    std::vector<double> m_previous; ///< the equilibrium before the current one (extrapolation)
+    double m_previous_travel = 0.0;
+};
+
 /// Moves landmarks with nodal displacements of the model (the interpolation predict_compression uses).
 LandmarkSet move_landmarks(const LiverModel& model, const std::vector<double>& displacement_mm, const LandmarkSet& rest_landmarks);
 

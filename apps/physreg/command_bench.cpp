@@ -1,0 +1,153 @@
+// physreg bench enrich: time per update (new tool position → every fine node at equilibrium) of the
+// high-resolution model and of the coarse-to-fine scheme, for compressions followed as sequences
+// of tool positions, each update warm-started from the previous one; TRE at the final depth.
+#include "cli_support.hpp"
+#include "progress.hpp"
+#include "registration_cli.hpp"
+
+#include "physreg/core/atomic_file.hpp"
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+#include "physreg/registration/enrichment.hpp"
+#include "physreg/registration/estimation.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <fstream>
+#include <iostream>
+#include <numeric>
+
+namespace physreg::cli {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+json timing_json(std::vector<double> ms, const std::vector<long>& iterations)
+{
+    const double mean = std::accumulate(ms.begin(), ms.end(), 0.0) / double(ms.size());
+    std::sort(ms.begin(), ms.end());
+    const double mean_iterations = std::accumulate(iterations.begin(), iterations.end(), 0.0) / double(iterations.size());
+    return {{"mean_ms", mean}, {"median_ms", ms[ms.size() / 2]}, {"max_ms", ms.back()}, {"min_ms", ms.front()},
+            {"mean_iterations", mean_iterations}, {"updates", ms.size()}};
+}
+
+} // namespace
+
+void add_subcommand_bench(CLI::App& app)
+{
+    auto* group = app.add_subcommand("bench", "Benchmarks of the registration pipeline (JSON)");
+    group->require_subcommand(1);
+    struct Options : CommonOptions {
+        std::string dataset, parameters, database, states = "D,E", output, match = "parameters", blend = "auto";
+        ModelOptions model;
+        int steps = 20;
+    };
+    auto o = std::make_shared<Options>();
+    auto* sub = group->add_subcommand("enrich", "Time per update of the high-resolution model and of coarse-to-fine along compressions "
+                                                "(warm-started tool sequences); speed-up and final TRE");
+    sub->add_option("--dataset", o->dataset, "Phantom dataset")->required();
+    sub->add_option("--parameters", o->parameters, "Parameter file (physreg estimate) the database was built with");
+    add_model_options(sub, o->model);
+    sub->add_option("--database", o->database, "Enrichment database (physreg enrich build)")->required();
+    sub->add_option("--states", o->states, "Compressions to follow (default D,E: the validation ones)");
+    sub->add_option("--steps", o->steps, "Tool positions from first contact to the final depth (default 20)");
+    sub->add_option("--match", o->match, "parameters or field");
+    sub->add_option("--blend", o->blend, "auto or a number of blended conditions");
+    sub->add_option("-o,--output", o->output, "JSON report (also printed with --json)");
+    sub->add_flag("--json", o->json, "Print the report on stdout");
+    sub->callback([o] {
+        if (o->steps < 1) fail("--steps must be ≥ 1 (got {})", o->steps);
+        if (!o->output.empty()) check_output_path(o->output, "--output");
+        const EnrichmentMatching how = parse_enrichment_matching(o->match);
+        const EnrichmentDatabase db = read_enrichment_database(o->database);
+        const LoadedModel loaded = load_model(o->dataset, o->parameters, o->model);
+        const auto g = json::parse(db.model_json).at("coarse_grid").get<std::vector<std::int64_t>>();
+        std::vector<NodeEmbedding> embedding;
+        const LiverModel coarse = coarsen_liver_model(loaded.model, {g.at(0), g.at(1), g.at(2)}, &embedding);
+        check_database_fits(db, loaded.model, coarse, "--database '" + o->database + "'");
+        int k = 1;
+        if (o->blend == "auto") k = choose_blend_size(db, coarse.mesh, embedding, loaded.model.mesh.nodes, 4);
+        else k = std::max(1, std::stoi(o->blend));
+        const auto cases = compression_cases(loaded.dataset, split_names(o->states, "--states"));
+        const PredictionOptions options = prediction_options(o->model);
+        json report;
+        report["what"] = "time per update: new tool position → every fine node at equilibrium, warm-started from the previous position";
+        report["threads"] = omp_get_max_threads();
+        report["convergence"] = {{"displacement_tolerance_mm", options.equilibrium.displacement_tolerance_mm},
+                                 {"residual_tolerance", options.equilibrium.residual_tolerance},
+                                 {"tool_speed_cells_per_iteration", options.tool_speed_per_cell}};
+        report["fine_model"] = {{"nodes", loaded.model.mesh.node_count()}, {"hexahedra", loaded.model.mesh.cell_count()},
+                                {"variant", to_string(loaded.model.parameters.variant)}};
+        report["coarse_model"] = {{"nodes", coarse.mesh.node_count()}, {"hexahedra", coarse.mesh.cell_count()}};
+        report["database"] = {{"file", o->database}, {"conditions", db.conditions.size()}, {"match", o->match}, {"blend", k}};
+        report["targets"] = {{"coarse_to_fine_ms", 10.0}, {"high_resolution_ms", 100.0}, {"tre_gap_mm", 0.5}};
+        ProgressDisplay bar("bench enrich");
+        std::vector<double> all_hr, all_c2f;
+        std::vector<TreReport> tre_hr, tre_c2f;
+        for (std::size_t c = 0; c < cases.size(); ++c) {
+            const auto& tool = cases[c].tool;
+            const Vec3 start = tool.path.front(), end = tool.path.back();
+            const double depth = (end - start).norm();
+            const Vec3 d = (end - start) / depth;
+            CompressionTracker high(loaded.model, tool, options), low(coarse, tool, options);
+            std::vector<double> ms_hr, ms_c2f;
+            std::vector<long> it_hr, it_c2f;
+            std::vector<double> fine_u;
+            CoarseToFinePrediction last;
+            for (int s = 1; s <= o->steps; ++s) {
+                const Vec3 position = start + depth * double(s) / double(o->steps) * d;
+                const std::string what = fmt::format("{} step {}", cases[c].name, s);
+                const auto h = high.move_to(position, what + " (high resolution)");
+                ms_hr.push_back(1e3 * h.seconds);
+                it_hr.push_back(h.iterations);
+                // Coarse-to-fine: coarse equilibrium, match, synthesis of every fine node and the landmarks.
+                const auto t0 = std::chrono::steady_clock::now();
+                const auto l = low.move_to(position, what + " (coarse)");
+                const auto cu = low.displacement_mm();
+                const EnrichmentCondition query{"", start, d, depth * double(s) / double(o->steps)};
+                const EnrichmentMatch m = match_enrichment(db, how, k, &query, cu);
+                fine_u = synthesize_fine_displacement(coarse.mesh, cu, embedding, loaded.model.mesh.nodes, blended_weights(db, m));
+                const LandmarkSet landmarks = move_landmarks(loaded.model, fine_u, loaded.rest_landmarks);
+                ms_c2f.push_back(1e3 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+                it_c2f.push_back(l.iterations);
+                if (s == o->steps) {
+                    tre_c2f.push_back(compute_tre(landmarks, cases[c].truth, cases[c].name));
+                    tre_hr.push_back(compute_tre(move_landmarks(loaded.model, high.displacement_mm(), loaded.rest_landmarks), cases[c].truth, cases[c].name));
+                    if (m.outside_range) logger()->warn("{}: outside the database's range: {}", cases[c].name, m.range_note);
+                }
+                bar.update(double(c * o->steps + s) / double(cases.size() * o->steps), what);
+            }
+            all_hr.insert(all_hr.end(), ms_hr.begin(), ms_hr.end());
+            all_c2f.insert(all_c2f.end(), ms_c2f.begin(), ms_c2f.end());
+            report["compressions"][cases[c].name] = {{"depth_mm", depth},
+                                                     {"high_resolution", timing_json(ms_hr, it_hr)},
+                                                     {"coarse_to_fine", timing_json(ms_c2f, it_c2f)},
+                                                     {"tre_high_resolution", json::parse(tre_stats_json(tre_hr.back()))},
+                                                     {"tre_coarse_to_fine", json::parse(tre_stats_json(tre_c2f.back()))}};
+        }
+        bar.finish();
+        const TreReport hr = pool_tre(tre_hr), c2f = pool_tre(tre_c2f);
+        const double mean_hr = std::accumulate(all_hr.begin(), all_hr.end(), 0.0) / double(all_hr.size());
+        const double mean_c2f = std::accumulate(all_c2f.begin(), all_c2f.end(), 0.0) / double(all_c2f.size());
+        report["summary"] = {{"high_resolution_ms_per_update", mean_hr},
+                             {"coarse_to_fine_ms_per_update", mean_c2f},
+                             {"speed_up", mean_hr / mean_c2f},
+                             {"tre_high_resolution", json::parse(tre_stats_json(hr))},
+                             {"tre_coarse_to_fine", json::parse(tre_stats_json(c2f))},
+                             {"tre_gap_mm", c2f.all.mean_mm - hr.all.mean_mm},
+                             {"meets_coarse_to_fine_target", mean_c2f <= 10.0},
+                             {"meets_high_resolution_target", mean_hr <= 100.0},
+                             {"meets_tre_target", c2f.all.mean_mm - hr.all.mean_mm <= 0.5}};
+        std::cerr << fmt::format("bench enrich ({} threads): high resolution {:.1f} ms/update, coarse-to-fine {:.1f} ms/update, speed-up "
+                                 "{:.1f}×; TRE at the final depth {:.3f} vs {:.3f} mm\n",
+                                 omp_get_max_threads(), mean_hr, mean_c2f, mean_hr / mean_c2f, hr.all.mean_mm, c2f.all.mean_mm);
+        if (!o->output.empty())
+            write_atomically(o->output, [&](const fs::path& tmp) { std::ofstream(tmp) << report.dump(2) << "\n"; });
+        if (o->json) std::cout << report.dump(2) << std::endl;
+    });
+}
+
+} // namespace physreg::cli
