@@ -33,7 +33,7 @@ expect_no_file() {
 expect_ok "--version" "$physreg" --version
 grep -q "physreg 0" "$work/out.txt" && pass || failed "--version prints the version"
 expect_ok "--help" "$physreg" --help
-for sub in mesh coarsen info convert demo phantom estimate register-compression evaluate "landmarks locate"; do
+for sub in mesh coarsen info convert demo phantom estimate register-compression evaluate "landmarks locate" "enrich build" "enrich apply" "bench enrich"; do
   expect_ok "$sub --help" "$physreg" $sub --help
 done
 
@@ -198,6 +198,41 @@ head -n 5 "$work/reg_D/landmarks.csv" > "$work/few.csv"
 expect_error "evaluate: landmarks missing" "no prediction" "$physreg" evaluate --predicted "$work/few.csv" --truth "$work/ph/states/D/landmarks.csv" -o "$work/eval_bad"
 expect_no_file "$work/eval_bad"
 ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
+
+# physreg enrich build / apply, bench enrich on the small phantom.
+cg="--coarse-grid 12x9x6"
+expect_ok "enrich build" "$physreg" --log-level warn enrich build --dataset "$work/ph" --parameters "$work/params.json" $cg --positions B,D \
+  --depths 3,6,9 -o "$work/db.phe" --json
+expect_file "$work/db.phe"
+grep -q '"conditions": 6' "$work/out.txt" && pass || failed "enrich build reports 6 conditions"
+[ -e "$work/db.phe.partial" ] && failed "checkpoints left after a finished build" || pass
+expect_error "enrich build: existing database" "use --force" "$physreg" enrich build --dataset "$work/ph" --parameters "$work/params.json" \
+  $cg --positions B --depths 3 -o "$work/db.phe"
+expect_ok "enrich apply" "$physreg" --log-level warn enrich apply --database "$work/db.phe" --dataset "$work/ph" --parameters "$work/params.json" \
+  --state D -o "$work/c2f_D" --json
+for f in mesh.vtu coarse.vtu landmarks.csv displacement.nii.gz summary.json; do expect_file "$work/c2f_D/$f"; done
+expect_ok "enrich apply by field" "$physreg" --log-level warn enrich apply --database "$work/db.phe" --dataset "$work/ph" \
+  --parameters "$work/params.json" --state B --match field --blend 2 -o "$work/c2f_B"
+expect_ok "enrich apply outside the range" "$physreg" enrich apply --database "$work/db.phe" --dataset "$work/ph" --parameters "$work/params.json" \
+  --state A -o "$work/c2f_A"
+grep -q "outside the database's range" "$work/err.txt" && grep -q "extrapolated" "$work/err.txt" && pass || failed "enrich apply warns about extrapolation"
+expect_ok "bench enrich" "$physreg" --log-level warn bench enrich --dataset "$work/ph" --parameters "$work/params.json" --database "$work/db.phe" \
+  --states D --steps 4 -o "$work/bench.json"
+grep -q '"speed_up"' "$work/bench.json" && pass || failed "bench enrich reports the speed-up"
+expect_error "enrich apply: database of another mesh" "built for another fine mesh" "$physreg" enrich apply --database "$work/db.phe" \
+  --dataset "$work/ph" --grid 30x27x12 --state D -o "$work/c2f_bad1"
+expect_no_file "$work/c2f_bad1"
+expect_error "enrich apply: other tissue parameters" "other model parameters" "$physreg" enrich apply --database "$work/db.phe" \
+  --dataset "$work/ph" $g --k-tumour 77 --state D -o "$work/c2f_bad2"
+head -c 20000 "$work/db.phe" > "$work/cut.phe"
+expect_error "enrich apply: truncated database" "truncated" "$physreg" enrich apply --database "$work/cut.phe" --dataset "$work/ph" \
+  --parameters "$work/params.json" --state D -o "$work/c2f_bad3"
+expect_no_file "$work/c2f_bad3"
+cp "$work/db.phe" "$work/flip.phe"
+printf '\x55' | dd of="$work/flip.phe" bs=1 seek=30000 conv=notrunc 2>/dev/null
+expect_error "enrich apply: corrupt database" "checksum mismatch" "$physreg" enrich apply --database "$work/flip.phe" --dataset "$work/ph" \
+  --parameters "$work/params.json" --state D -o "$work/c2f_bad4"
+expect_no_file "$work/c2f_bad4"
 
 echo "$passes passed, $failures failed"
 [ "$failures" -eq 0 ]

@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <omp.h>
 
 namespace physreg {
 namespace {
@@ -156,6 +157,119 @@ TEST(EnrichmentDatabase, TruncatedOrBitFlippedFilesAreRejected)
     bad.weights[2].pop_back();
     EXPECT_NE(test::error_message([&] { write_enrichment_database(dir / "bad.phe", bad); }).find("condition 2"), std::string::npos);
     EXPECT_FALSE(std::filesystem::exists(dir / "bad.phe"));
+}
+
+} // namespace
+} // namespace physreg
+
+namespace physreg {
+namespace {
+
+TEST(EnrichmentPlan, ConditionsAndOrientations)
+{
+    EnrichmentPlan plan;
+    plan.positions = {{"A", Vec3(0, 0, 0)}, {"B", Vec3(10, 0, 0)}};
+    plan.depths_mm = {2, 4, 6};
+    plan.orientations = 4;
+    plan.tilt_deg = 15;
+    const auto c = plan.conditions();
+    ASSERT_EQ(c.size(), 2u * 4u * 3u);
+    EXPECT_EQ(c[0].position, "A");
+    EXPECT_EQ(c[0].depth_mm, 2.0);
+    EXPECT_EQ(c[2].depth_mm, 6.0);
+    EXPECT_EQ(c[12].position, "B");
+    EXPECT_LT((plan.orientation(0) - Vec3::UnitY()).norm(), 1e-15);
+    for (int o = 1; o < 4; ++o) EXPECT_NEAR(std::acos(plan.orientation(o).dot(Vec3::UnitY())) * 180 / M_PI, 15.0, 1e-9);
+    EXPECT_GT((plan.orientation(1) - plan.orientation(2)).norm(), 0.1);
+    plan.depths_mm = {4, 2};
+    EXPECT_NE(test::error_message([&] { plan.validate(); }).find("increasing"), std::string::npos);
+}
+
+struct SmallBuild {
+    EnrichmentPlan plan;
+    EnrichmentBuildOptions options;
+    Indenter shape;
+    SmallBuild()
+    {
+        const auto& t = levels();
+        plan.positions = {{"B", t.condition.contact_mm}, {"B2", t.condition.contact_mm + Vec3(8, 0, 0)}};
+        plan.direction = t.condition.direction;
+        plan.depths_mm = {3.0, 6.0};
+        shape.shape = IndenterShape::sphere;
+        shape.radius_mm = 10.0;
+        shape.path = {Vec3::Zero()};
+    }
+    EnrichmentDatabase build(const EnrichmentBuildOptions& o) const
+    {
+        const auto& t = levels();
+        return build_enrichment_database(t.fine, t.coarse, t.embedding, shape, plan, o);
+    }
+};
+
+TEST(EnrichmentBuild, SameDatabaseForAnyThreadOrRankCountAndResumes)
+{
+    const SmallBuild b;
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(1);
+    const EnrichmentDatabase one = b.build(b.options);
+    omp_set_num_threads(2);
+    const EnrichmentDatabase two = b.build(b.options);
+    omp_set_num_threads(threads);
+    ASSERT_EQ(one.conditions.size(), 4u);
+    EXPECT_EQ(serialize_enrichment_database(one), serialize_enrichment_database(two));
+    // Two ranks' parts merged = the whole.
+    EnrichmentBuildOptions r0 = b.options, r1 = b.options;
+    r0.ranks = r1.ranks = 2;
+    r1.rank = 1;
+    const auto p0 = b.build(r0), p1 = b.build(r1);
+    EXPECT_EQ(p0.conditions.size(), 2u);
+    EXPECT_EQ(serialize_enrichment_database(merge_enrichment_parts({p1, p0}, b.plan)), serialize_enrichment_database(one));
+    EXPECT_NE(test::error_message([&] { merge_enrichment_parts({p0}, b.plan); }).find("missing"), std::string::npos);
+    // Checkpoints: a second run reads them back; a corrupt one is rebuilt.
+    test::TempDir dir;
+    EnrichmentBuildOptions resume = b.options;
+    resume.checkpoint_directory = dir / "partial";
+    const auto first = b.build(resume);
+    EXPECT_TRUE(std::filesystem::exists(dir / "partial" / "sequence_00001.phe"));
+    std::ofstream(dir / "partial" / "sequence_00001.phe", std::ios::binary | std::ios::trunc) << "corrupt";
+    const auto again = b.build(resume);
+    EXPECT_EQ(serialize_enrichment_database(again), serialize_enrichment_database(one));
+    EXPECT_EQ(serialize_enrichment_database(first), serialize_enrichment_database(one));
+}
+
+TEST(EnrichmentMatch, ExactConditionsRangeAndModelChecks)
+{
+    const SmallBuild b;
+    const auto& t = levels();
+    const EnrichmentDatabase db = b.build(b.options);
+    // By parameters: a stored condition is found exactly and alone.
+    const EnrichmentCondition query = db.conditions[3];
+    const auto m = match_enrichment(db, EnrichmentMatching::parameters, 2, &query, {});
+    EXPECT_EQ(m.conditions.front(), 3u);
+    EXPECT_EQ(m.blend.front(), 1.0);
+    EXPECT_FALSE(m.outside_range);
+    // By field: the stored coarse field finds its condition.
+    const std::vector<double> field(db.coarse_displacement[2].begin(), db.coarse_displacement[2].end());
+    EXPECT_EQ(match_enrichment(db, EnrichmentMatching::field, 1, nullptr, field).conditions.front(), 2u);
+    // Deeper than stored: flagged as extrapolation, saying how far.
+    EnrichmentCondition deep = query;
+    deep.depth_mm = 9.5;
+    const auto out = match_enrichment(db, EnrichmentMatching::parameters, 1, &deep, {});
+    EXPECT_TRUE(out.outside_range);
+    EXPECT_NE(out.range_note.find("3.50 mm beyond the deepest stored (6.00 mm)"), std::string::npos) << out.range_note;
+    EXPECT_NE(test::error_message([&] { match_enrichment(db, EnrichmentMatching::parameters, 1, nullptr, {}); }).find("needs the tool"),
+              std::string::npos);
+    // Blend size chosen by leave-one-out: an error per size, the smallest wins.
+    std::vector<double> errors;
+    const int k = choose_blend_size(db, t.coarse.mesh, t.embedding, t.fine.mesh.nodes, 3, &errors);
+    ASSERT_EQ(errors.size(), 3u);
+    EXPECT_EQ(errors[static_cast<std::size_t>(k - 1)], *std::min_element(errors.begin(), errors.end()));
+    // The database must fit the model: same meshes and parameters.
+    EXPECT_NO_THROW(check_database_fits(db, t.fine, t.coarse, "db"));
+    LiverModel other = build_liver_model(read_label_volume(levels().dir / "ds" / "rest" / "labels.nii.gz"), phantom_label_roles(),
+                                         [] { ModelParameters p; p.grid = {36, 27, 12}; p.coupling = {900, 500}; return p; }(), "other");
+    EXPECT_NE(test::error_message([&] { check_database_fits(db, other, t.coarse, "db"); }).find("other model parameters"), std::string::npos);
+    EXPECT_NE(test::error_message([&] { check_database_fits(db, t.coarse, t.coarse, "db"); }).find("another fine mesh"), std::string::npos);
 }
 
 } // namespace

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# An enrichment database built by 2 MPI ranks (mpirun) is byte-identical to the 1-process build.
+set -eu
+physreg="$1"
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+"$physreg" --log-level warn phantom --preset small -o "$work/ph"
+args=(--log-level warn enrich build --dataset "$work/ph" --grid 36x27x12 --coarse-grid 12x9x6 --positions B,C,D --depths 3,6)
+"$physreg" "${args[@]}" -o "$work/one.phe"
+root=()
+[ "$(id -u)" -eq 0 ] && root=(--allow-run-as-root)
+OMP_NUM_THREADS=1 mpirun "${root[@]}" --oversubscribe -np 2 "$physreg" "${args[@]}" -o "$work/two.phe"
+cmp "$work/one.phe" "$work/two.phe"
+[ ! -e "$work/two.phe.partial" ]
+echo "mpi: 2-rank database identical to the 1-process build ($(stat -c %s "$work/one.phe") bytes)"
