@@ -88,38 +88,19 @@ void add_subcommand_bench(CLI::App& app)
         std::vector<double> all_hr, all_c2f;
         std::vector<TreReport> tre_hr, tre_c2f;
         for (std::size_t c = 0; c < cases.size(); ++c) {
-            const auto& tool = cases[c].tool;
-            const Vec3 start = tool.path.front(), end = tool.path.back();
-            const double depth = (end - start).norm();
-            const Vec3 d = (end - start) / depth;
-            CompressionTracker high(loaded.model, tool, options), low(coarse, tool, options);
-            std::vector<double> ms_hr, ms_c2f;
-            std::vector<long> it_hr, it_c2f;
-            std::vector<double> fine_u;
-            CoarseToFinePrediction last;
-            for (int s = 1; s <= o->steps; ++s) {
-                const Vec3 position = start + depth * double(s) / double(o->steps) * d;
-                const std::string what = fmt::format("{} step {}", cases[c].name, s);
-                const auto h = high.move_to(position, what + " (high resolution)");
-                ms_hr.push_back(1e3 * h.seconds);
-                it_hr.push_back(h.iterations);
-                // Coarse-to-fine: coarse equilibrium, match, synthesis of every fine node and the landmarks.
-                const auto t0 = std::chrono::steady_clock::now();
-                const auto l = low.move_to(position, what + " (coarse)");
-                const auto cu = low.displacement_mm();
-                const EnrichmentCondition query{"", start, d, depth * double(s) / double(o->steps)};
-                const EnrichmentMatch m = match_enrichment(db, how, k, &query, cu);
-                fine_u = synthesize_fine_displacement(coarse.mesh, cu, embedding, loaded.model.mesh.nodes, blended_weights(db, m));
-                const LandmarkSet landmarks = move_landmarks(loaded.model, fine_u, loaded.rest_landmarks);
-                ms_c2f.push_back(1e3 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-                it_c2f.push_back(l.iterations);
-                if (s == o->steps) {
-                    tre_c2f.push_back(compute_tre(landmarks, cases[c].truth, cases[c].name));
-                    tre_hr.push_back(compute_tre(move_landmarks(loaded.model, high.displacement_mm(), loaded.rest_landmarks), cases[c].truth, cases[c].name));
-                    if (m.outside_range) logger()->warn("{}: outside the database's range: {}", cases[c].name, m.range_note);
-                }
-                bar.update(double(c * o->steps + s) / double(cases.size() * o->steps), what);
-            }
+            const double depth = (cases[c].tool.path.back() - cases[c].tool.path.front()).norm();
+            const TrackingRun run = track_compression(loaded.model, coarse, embedding, db, cases[c].tool, loaded.rest_landmarks, o->steps, how, k,
+                                                      options, cases[c].name, [&](int s) {
+                                                          bar.update(double(c * o->steps + s) / double(cases.size() * o->steps),
+                                                                     fmt::format("{} step {}", cases[c].name, s));
+                                                      });
+            if (run.last_match.outside_range) logger()->warn("{}: outside the database's range: {}", cases[c].name, run.last_match.range_note);
+            tre_hr.push_back(compute_tre(run.high_resolution_landmarks, cases[c].truth, cases[c].name));
+            tre_c2f.push_back(compute_tre(run.coarse_to_fine_landmarks, cases[c].truth, cases[c].name));
+            const auto& ms_hr = run.high_resolution_ms;
+            const auto& ms_c2f = run.coarse_to_fine_ms;
+            const auto& it_hr = run.high_resolution_iterations;
+            const auto& it_c2f = run.coarse_iterations;
             all_hr.insert(all_hr.end(), ms_hr.begin(), ms_hr.end());
             all_c2f.insert(all_c2f.end(), ms_c2f.begin(), ms_c2f.end());
             report["compressions"][cases[c].name] = {{"depth_mm", depth},

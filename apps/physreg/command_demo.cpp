@@ -1,6 +1,8 @@
-// physreg demo: the main job on the built-in synthetic liver. Until the solver and registration
-// issues land it runs the front half of the pipeline: label volume → hexahedral meshes (voxel,
-// paper-like grid, coarse) → surfaces, tetrahedra, landmarks located in the mesh.
+// physreg demo: the main job. On the built-in CIRS-057A-like phantom it runs paper 000 end to end:
+// phantom dataset → coupling estimation (train A, B, C) → detail enrichment database → registration
+// of the validation compressions (D, E) with the homogeneous, the high-resolution heterogeneous and
+// the coarse-to-fine model → TRE and time per update beside paper 000's figures, VTU files and PNG
+// figures. --quick does the same on the small preset (tests).
 #include "cli_support.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -20,6 +22,18 @@
 #include "progress.hpp"
 
 #include "physreg/phantom/dataset.hpp"
+#include "physreg/evaluation/tre.hpp"
+#include "physreg/field/displacement_sampling.hpp"
+#include "physreg/figures/slice_figure.hpp"
+#include "physreg/io/png.hpp"
+#include "physreg/io/vtu.hpp"
+#include "physreg/registration/enrichment.hpp"
+#include "physreg/registration/estimation.hpp"
+#include "registration_cli.hpp"
+
+#include <numeric>
+#include <omp.h>
+#include "physreg/core/version.hpp"
 
 #include <chrono>
 #include <fstream>
@@ -27,165 +41,355 @@
 
 namespace physreg::cli {
 
+namespace {
+
+// The building blocks on the small synthetic liver (labels 1–3, paper 000's default tissues):
+// meshes (voxel, grid, coarse), surfaces, tetrahedra, located landmarks, a TLED indentation.
+// Quick; its files are the inputs of the command-line tests and show each format.
+nlohmann::json run_meshing_blocks(const std::filesystem::path& dir)
+{
+    namespace fs = std::filesystem;
+    using clock = std::chrono::steady_clock;
+    auto ms_since = [](clock::time_point t0) {
+        return std::chrono::duration<double, std::milli>(clock::now() - t0).count();
+    };
+    const Index3 grid{72, 56, 36};
+    const Index3 coarse_grid{24, 18, 18};
+    const double voxel_mm = 2.0;
+    fs::create_directories(dir);
+    auto step = [](int n, const std::string& text) { logger()->debug("meshing blocks [{}/7] {}", n, text); };
+
+    step(1, "synthetic liver label volume");
+    auto t0 = clock::now();
+    const SyntheticPhantom phantom = make_synthetic_liver(voxel_mm);
+    const TissueTable tissues = default_tissue_table();
+    write_label_volume(dir / "labels.nii.gz", phantom.labels);
+    write_tissue_table(dir / "tissues.yaml", tissues);
+    for (const char* name : {"landmarks.csv", "landmarks.mrk.json", "landmarks.fcsv"})
+        write_landmarks(dir / name, phantom.landmarks);
+    const double phantom_ms = ms_since(t0);
+
+    step(2, "hexahedral mesh, one hexahedron per voxel");
+    t0 = clock::now();
+    MeshingOptions voxel_options;
+    const auto voxel = mesh_label_volume(phantom.labels, tissues, voxel_options, "synthetic liver");
+    const double voxel_ms = ms_since(t0);
+    write_volume_mesh(dir / "mesh_voxels.vtu", voxel.mesh);
+
+    step(3, "hexahedral mesh on the 72x56x36 grid (majority rule)");
+    t0 = clock::now();
+    MeshingOptions grid_options;
+    grid_options.grid_dims = grid;
+    const auto fine = mesh_label_volume(phantom.labels, tissues, grid_options, "synthetic liver");
+    const double grid_ms = ms_since(t0);
+    write_volume_mesh(dir / "mesh_fine.vtu", fine.mesh);
+
+    step(4, "coarse mesh on the 24x18x18 grid, fine nodes embedded");
+    t0 = clock::now();
+    const auto coarse = coarsen(fine.mesh, coarse_grid, ComponentPolicy::keep_all);
+    const double coarse_ms = ms_since(t0);
+    write_volume_mesh(dir / "mesh_coarse.vtu", coarse.mesh);
+    std::size_t outside = 0;
+    for (const auto& e : coarse.fine_nodes) outside += !e.inside;
+
+    step(5, "surfaces (boundary + tissue interfaces) and conforming tetrahedra");
+    t0 = clock::now();
+    const SurfaceMesh surfaces = extract_surfaces(fine.mesh);
+    const VolumeMesh tets = split_hexahedra_into_tetrahedra(fine.mesh);
+    const double surface_ms = ms_since(t0);
+    write_surface(dir / "surfaces_fine.ply", surfaces);
+    write_surface(dir / "boundary_fine.stl", extract_boundary(fine.mesh));
+    write_volume_mesh(dir / "tetrahedra_fine.vtu", tets);
+
+    step(6, "landmarks located in the fine mesh");
+    const PointLocator locator(fine.mesh);
+    nlohmann::json located = nlohmann::json::array();
+    for (const auto& l : phantom.landmarks) {
+        const auto e = locator.locate(l.position);
+        located.push_back({{"name", l.name}, {"type", to_string(l.type)}, {"inside_mesh", e.has_value()},
+                           {"cell", e ? e->cell : -1}});
+    }
+
+    step(7, "TLED: a 30 mm sphere pressed 10 mm into the anterior surface of the coarse model");
+    SimulationCase indentation;
+    indentation.source = dir / "summary.json";
+    indentation.mesh_file = dir / "mesh_coarse.vtu";
+    indentation.tissues_file = dir / "tissues.yaml";
+    indentation.load_steps = 4;
+    SimulationCase::Constraint back;
+    back.name = "posterior face";
+    back.select.axis = 1;
+    back.select.side = "max";
+    back.select.tolerance_mm = 3.0;
+    indentation.constraints.push_back(back);
+    Indenter tool;
+    tool.name = "sphere";
+    tool.radius_mm = 15.0;
+    tool.path = {Vec3(-30, -78, 0), Vec3(-30, -68, 0)};
+    indentation.indenters.push_back(tool);
+    indentation.output_directory = dir / "indentation";
+    indentation.frames = 4;
+    indentation.field_spacing_mm = 2.0;
+    const SimulationResult simulated = run_simulation(indentation, {});
+    const nlohmann::json simulation = write_simulation_outputs(indentation, simulated);
+    long iterations = 0;
+    for (const auto& e : simulated.equilibria) iterations += e.iterations;
+
+    return {
+        {"label_volume", to_json(phantom.labels.geometry)},
+        {"voxel_mesh", mesh_summary(voxel.mesh, &tissues)},
+        {"fine_mesh", mesh_summary(fine.mesh, &tissues)},
+        {"coarse_mesh", mesh_summary(coarse.mesh, &tissues)},
+        {"fine_nodes_outside_coarse_mesh", outside},
+        {"surface_triangles", surfaces.triangles.size()},
+        {"tetrahedra", tets.cell_count()},
+        {"landmarks", located},
+        {"indentation", simulation},
+        {"timings_ms", {{"phantom", phantom_ms}, {"voxel_mesh", voxel_ms}, {"grid_mesh", grid_ms},
+                        {"coarsen_and_embed", coarse_ms}, {"surfaces_and_tetrahedra", surface_ms}}}};
+}
+
+} // namespace
+
 void add_subcommand_demo(CLI::App& app)
 {
     struct Options : CommonOptions {
         std::string output = "demo-out";
-        std::string grid = "72x56x36";
-        std::string coarse = "24x18x18";
-        double voxel_mm = 2.0;
+        bool quick = false, rebuild = false;
+        int evaluations = 0;
     };
     auto o = std::make_shared<Options>();
-    auto* sub = app.add_subcommand("demo", "Run the main job on the built-in synthetic liver phantom");
+    auto* sub = app.add_subcommand("demo", "The main job: phantom → estimation → enrichment database → registration of the validation "
+                                           "compressions (homogeneous, high-resolution, coarse-to-fine) with TRE, timings and figures");
     sub->add_option("-o,--output", o->output, "Output directory (created)")->capture_default_str();
-    sub->add_option("--grid", o->grid, "High-resolution grid over the liver")->capture_default_str();
-    sub->add_option("--coarse-grid", o->coarse, "Coarse grid")->capture_default_str();
-    sub->add_option("--voxel-mm", o->voxel_mm, "Voxel size of the synthetic label volume, mm")->capture_default_str();
+    sub->add_flag("--quick", o->quick, "Small preset and grids (≈ 1 min; for tests)");
+    sub->add_flag("--rebuild-phantom", o->rebuild, "Rebuild the phantom dataset even if OUTPUT/phantom holds one from an earlier run");
+    sub->add_option("--max-evaluations", o->evaluations, "Estimation budget (default 12; quick 4)");
     sub->add_flag("--json", o->json, "Print the JSON summary on stdout");
     sub->callback([o] {
         namespace fs = std::filesystem;
+        using json = nlohmann::json;
         using clock = std::chrono::steady_clock;
-        auto ms_since = [](clock::time_point t0) {
-            return std::chrono::duration<double, std::milli>(clock::now() - t0).count();
-        };
-        const Index3 grid = parse_grid_dims(o->grid, "--grid");
-        const Index3 coarse_grid = parse_grid_dims(o->coarse, "--coarse-grid");
-        fs::create_directories(o->output);
+        const auto start = clock::now();
+        auto seconds_since = [](clock::time_point t) { return std::chrono::duration<double>(clock::now() - t).count(); };
         const fs::path dir(o->output);
-        auto step = [](int n, const std::string& text) { logger()->info("[{}/8] {}", n, text); };
+        fs::create_directories(dir / "figures");
+        fs::create_directories(dir / "registration");
+        const int steps_total = 7;
+        auto step = [&](int n, const std::string& text) { logger()->info("[{}/{}] {} ({:.0f} s so far)", n, steps_total, text, seconds_since(start)); };
+        // Settings: paper 000's grids on the full phantom; small ones for --quick.
+        const std::string preset = o->quick ? "small" : "cirs057a";
+        const Index3 grid = o->quick ? Index3{36, 27, 12} : Index3{74, 54, 18};
+        const Index3 coarse_grid = o->quick ? Index3{12, 9, 6} : Index3{24, 18, 18};
+        const std::vector<double> depths = o->quick ? std::vector<double>{3, 6, 9} : std::vector<double>{2, 4, 6, 8, 10, 12, 14};
+        const int evaluations = o->evaluations > 0 ? o->evaluations : (o->quick ? 4 : 12);
+        const int track_steps = o->quick ? 5 : 20;
+        const std::vector<std::string> train{"A", "B", "C"}, validation{"D", "E"};
 
-        step(1, "synthetic liver label volume");
-        auto t0 = clock::now();
-        const SyntheticPhantom phantom = make_synthetic_liver(o->voxel_mm);
-        const TissueTable tissues = default_tissue_table();
-        write_label_volume(dir / "labels.nii.gz", phantom.labels);
-        write_tissue_table(dir / "tissues.yaml", tissues);
-        for (const char* name : {"landmarks.csv", "landmarks.mrk.json", "landmarks.fcsv"})
-            write_landmarks(dir / name, phantom.landmarks);
-        const double phantom_ms = ms_since(t0);
+        step(1, "building blocks on the synthetic liver: meshes, surfaces, tetrahedra, a TLED indentation → meshing/");
+        const json blocks = run_meshing_blocks(dir / "meshing");
 
-        step(2, "hexahedral mesh, one hexahedron per voxel");
-        t0 = clock::now();
-        MeshingOptions voxel_options;
-        const auto voxel = mesh_label_volume(phantom.labels, tissues, voxel_options, "synthetic liver");
-        const double voxel_ms = ms_since(t0);
-        write_volume_mesh(dir / "mesh_voxels.vtu", voxel.mesh);
-
-        step(3, "hexahedral mesh on the " + o->grid + " grid (majority rule)");
-        t0 = clock::now();
-        MeshingOptions grid_options;
-        grid_options.grid_dims = grid;
-        const auto fine = mesh_label_volume(phantom.labels, tissues, grid_options, "synthetic liver");
-        const double grid_ms = ms_since(t0);
-        write_volume_mesh(dir / "mesh_fine.vtu", fine.mesh);
-
-        step(4, "coarse mesh on the " + o->coarse + " grid, fine nodes embedded");
-        t0 = clock::now();
-        const auto coarse = coarsen(fine.mesh, coarse_grid, ComponentPolicy::keep_all);
-        const double coarse_ms = ms_since(t0);
-        write_volume_mesh(dir / "mesh_coarse.vtu", coarse.mesh);
-        std::size_t outside = 0;
-        for (const auto& e : coarse.fine_nodes) outside += !e.inside;
-
-        step(5, "surfaces (boundary + tissue interfaces) and conforming tetrahedra");
-        t0 = clock::now();
-        const SurfaceMesh surfaces = extract_surfaces(fine.mesh);
-        const VolumeMesh tets = split_hexahedra_into_tetrahedra(fine.mesh);
-        const double surface_ms = ms_since(t0);
-        write_surface(dir / "surfaces_fine.ply", surfaces);
-        write_surface(dir / "boundary_fine.stl", extract_boundary(fine.mesh));
-        write_volume_mesh(dir / "tetrahedra_fine.vtu", tets);
-
-        step(6, "landmarks located in the fine mesh");
-        const PointLocator locator(fine.mesh);
-        nlohmann::json located = nlohmann::json::array();
-        for (const auto& l : phantom.landmarks) {
-            const auto e = locator.locate(l.position);
-            located.push_back({{"name", l.name}, {"type", to_string(l.type)}, {"inside_mesh", e.has_value()},
-                               {"cell", e ? e->cell : -1}});
+        step(2, "phantom dataset (" + preset + " preset) → phantom/");
+        const fs::path phantom_dir = dir / "phantom";
+        bool reuse = false;
+        if (!o->rebuild && fs::exists(phantom_dir / "manifest.json")) {
+            try {
+                const PhantomDataset old = read_phantom_dataset(phantom_dir);
+                reuse = old.preset == preset && old.seed == 1 && old.generator_version == VERSION;
+            } catch (const Error&) {
+                reuse = false;
+            }
+            if (reuse) logger()->info("reusing the phantom dataset of an earlier run in '{}' (--rebuild-phantom makes it anew)", phantom_dir.string());
         }
+        double phantom_s = 0.0;
+        if (!reuse) {
+            const auto t = clock::now();
+            ProgressDisplay bar("phantom");
+            generate_phantom_dataset(PhantomSpec::preset_spec(preset), phantom_dir, true, [&](double f, const std::string& m) { bar.update(f, m); });
+            bar.finish();
+            phantom_s = seconds_since(t);
+        }
+        const PhantomDataset dataset = read_phantom_dataset(phantom_dir);
+        const LabelVolume rest_labels = read_label_volume(dataset.path(dataset.state("rest").files.at("labels")));
+        const LandmarkSet rest_landmarks = read_landmarks(dataset.path(dataset.state("rest").files.at("landmarks")));
+        const auto train_cases = compression_cases(dataset, train), validation_cases = compression_cases(dataset, validation);
 
-        step(7, "TLED: a 30 mm sphere pressed 10 mm into the anterior surface of the coarse model");
-        SimulationCase indentation;
-        indentation.source = dir / "summary.json";
-        indentation.mesh_file = dir / "mesh_coarse.vtu";
-        indentation.tissues_file = dir / "tissues.yaml";
-        indentation.load_steps = 4;
-        SimulationCase::Constraint back;
-        back.name = "posterior face";
-        back.select.axis = 1;
-        back.select.side = "max";
-        back.select.tolerance_mm = 3.0;
-        indentation.constraints.push_back(back);
-        Indenter tool;
-        tool.name = "sphere";
-        tool.radius_mm = 15.0;
-        tool.path = {Vec3(-30, -78, 0), Vec3(-30, -68, 0)};
-        indentation.indenters.push_back(tool);
-        indentation.output_directory = dir / "indentation";
-        indentation.frames = 4;
-        indentation.field_spacing_mm = 2.0;
-        ProgressDisplay bar("indentation");
-        const SimulationResult simulated = run_simulation(indentation, [&](double f, const std::string& m) { bar.update(f, m); });
+        step(3, "coupling stiffnesses estimated on A, B, C (NLopt BOBYQA), checked on D, E → params.json");
+        auto t = clock::now();
+        ModelParameters initial;
+        initial.grid = grid;
+        EstimationOptions estimation;
+        estimation.max_evaluations = evaluations;
+        EstimationResult fit;
+        {
+            ProgressDisplay bar("estimate");
+            fit = estimate_parameters(rest_labels, dataset.roles, initial, rest_landmarks, train_cases, validation_cases, estimation,
+                                      [&](double f, const std::string& m) { bar.update(f, m); });
+            bar.finish();
+        }
+        write_model_parameters(dir / "params.json", fit.fitted, fit.fingerprint,
+                               json({{"objective_mm", fit.objective_mm}, {"evaluations", fit.history.size()}}).dump());
+        const double estimate_s = seconds_since(t);
+
+        step(4, "detail enrichment database: positions A–E × depths, fine and coarse models → enrichment.phe");
+        t = clock::now();
+        const LiverModel fine = build_liver_model(rest_labels, dataset.roles, fit.fitted, "phantom rest labels");
+        std::vector<NodeEmbedding> embedding;
+        const LiverModel coarse = coarsen_liver_model(fine, coarse_grid, &embedding);
+        EnrichmentPlan plan;
+        for (const auto& s : dataset.states)
+            if (s.tool) plan.positions.push_back({s.name, s.tool->path.front()}), plan.direction = (s.tool->path.back() - s.tool->path.front()).normalized();
+        plan.depths_mm = depths;
+        EnrichmentDatabase db;
+        {
+            ProgressDisplay bar("enrich build");
+            EnrichmentBuildOptions options;
+            options.checkpoint_directory = dir / "enrichment.phe.partial";
+            options.progress = [&](double f, const std::string& m) { bar.update(f, m); };
+            db = build_enrichment_database(fine, coarse, embedding, validation_cases.front().tool, plan, options);
+            bar.finish();
+        }
+        write_enrichment_database(dir / "enrichment.phe", db);
+        fs::remove_all(dir / "enrichment.phe.partial");
+        const int blend = choose_blend_size(db, coarse.mesh, embedding, fine.mesh.nodes, 4);
+        const double database_s = seconds_since(t);
+        const auto database_bytes = fs::file_size(dir / "enrichment.phe");
+
+        step(5, "validation compressions D, E followed in " + std::to_string(track_steps) +
+                    " tool positions: homogeneous, high-resolution heterogeneous, coarse-to-fine");
+        t = clock::now();
+        ModelParameters homogeneous_parameters = fit.fitted;
+        homogeneous_parameters.variant = ModelVariant::homogeneous;
+        const LiverModel homogeneous = build_liver_model(rest_labels, dataset.roles, homogeneous_parameters, "phantom rest labels");
+        const PredictionOptions prediction;
+        struct Method {
+            std::string name, paper;
+            double paper_all, paper_surface, paper_internal, paper_ms;
+            std::vector<TreReport> tre;
+            std::vector<double> ms;
+        };
+        std::vector<Method> methods{{"homogeneous (Han et al.)", "7.74 / 6.39 / 8.81 mm, 344.83 ms", 7.74, 6.39, 8.81, 344.83, {}, {}},
+                                    {"high-resolution heterogeneous", "2.22 / 2.45 / 2.04 mm, 344.83 ms", 2.22, 2.45, 2.04, 344.83, {}, {}},
+                                    {"coarse-to-fine", "3.42 / 3.46 / 3.38 mm, 36.76 ms", 3.42, 3.46, 3.38, 36.76, {}, {}}};
+        json per_state;
+        ProgressDisplay bar("registration");
+        for (std::size_t c = 0; c < validation_cases.size(); ++c) {
+            const auto& vc = validation_cases[c];
+            const TrackingRun run = track_compression(fine, coarse, embedding, db, vc.tool, rest_landmarks, track_steps, EnrichmentMatching::parameters,
+                                                      blend, prediction, vc.name, [&](int s) {
+                                                          bar.update((double(c) + double(s) / double(track_steps)) / double(validation_cases.size()),
+                                                                     fmt::format("{} step {}", vc.name, s));
+                                                      });
+            if (run.last_match.outside_range) logger()->warn("{}: outside the database's range ({}); extrapolated", vc.name, run.last_match.range_note);
+            // Homogeneous model: the same tracking.
+            CompressionTracker plain(homogeneous, vc.tool, prediction);
+            const Vec3 a = vc.tool.path.front(), b = vc.tool.path.back();
+            for (int s = 1; s <= track_steps; ++s)
+                methods[0].ms.push_back(1e3 * plain.move_to(a + (b - a) * double(s) / double(track_steps), vc.name + " (homogeneous)").seconds);
+            const auto homogeneous_u = plain.displacement_mm();
+            const LandmarkSet homogeneous_landmarks = move_landmarks(homogeneous, homogeneous_u, rest_landmarks);
+            methods[0].tre.push_back(compute_tre(homogeneous_landmarks, vc.truth, vc.name));
+            methods[1].tre.push_back(compute_tre(run.high_resolution_landmarks, vc.truth, vc.name));
+            methods[2].tre.push_back(compute_tre(run.coarse_to_fine_landmarks, vc.truth, vc.name));
+            methods[1].ms.insert(methods[1].ms.end(), run.high_resolution_ms.begin(), run.high_resolution_ms.end());
+            methods[2].ms.insert(methods[2].ms.end(), run.coarse_to_fine_ms.begin(), run.coarse_to_fine_ms.end());
+            // VTU for ParaView: the fine mesh with both solutions and their difference; the homogeneous one.
+            std::vector<double> difference(run.high_resolution_u.size()), magnitude(fine.mesh.node_count());
+            double largest = 0.0;
+            for (std::size_t k = 0; k < difference.size(); ++k) difference[k] = run.coarse_to_fine_u[k] - run.high_resolution_u[k];
+            for (std::size_t n = 0; n < magnitude.size(); ++n) {
+                magnitude[n] = Vec3(difference[3 * n], difference[3 * n + 1], difference[3 * n + 2]).norm();
+                largest = std::max(largest, magnitude[n]);
+            }
+            MeshData data;
+            data.point_data = {{"displacement_high_resolution", 3, run.high_resolution_u},
+                               {"displacement_coarse_to_fine", 3, run.coarse_to_fine_u},
+                               {"difference_mm", 3, difference},
+                               {"difference_magnitude_mm", 1, magnitude}};
+            write_vtu(dir / "registration" / (vc.name + "_fine.vtu"), fine.mesh, data);
+            MeshData plain_data;
+            plain_data.point_data = {{"displacement", 3, homogeneous_u}};
+            write_vtu(dir / "registration" / (vc.name + "_homogeneous.vtu"), homogeneous.mesh, plain_data);
+            write_landmarks(dir / "registration" / (vc.name + "_landmarks_high_resolution.csv"), run.high_resolution_landmarks);
+            write_landmarks(dir / "registration" / (vc.name + "_landmarks_coarse_to_fine.csv"), run.coarse_to_fine_landmarks);
+            write_landmarks(dir / "registration" / (vc.name + "_landmarks_homogeneous.csv"), homogeneous_landmarks);
+            // Figures: slices through the tool's dent with true (green) and predicted (red) landmarks
+            // (paper 000 figs. 8/9), and the map of |coarse-to-fine − high-resolution| (fig. 11).
+            const DatasetState& state = dataset.state(vc.name);
+            const ScalarImage intensity = read_scalar_image(dataset.path(state.files.at("intensity")));
+            const LabelVolume labels = read_label_volume(dataset.path(state.files.at("labels")));
+            SliceFigureOptions figure;
+            figure.centre = b + vc.tool.radius_mm * (b - a).normalized();
+            figure.pixels_per_mm = o->quick ? 1.0 : 2.0;
+            figure.title = fmt::format("{}: TRUE (GREEN) AND COARSE-TO-FINE (RED) LANDMARKS", vc.name);
+            write_png(dir / "figures" / ("slices_" + vc.name + "_coarse_to_fine.png"),
+                      render_orthogonal_slices(intensity, labels, dataset.roles, vc.truth, run.coarse_to_fine_landmarks, figure).image());
+            figure.title = fmt::format("{}: TRUE (GREEN) AND HIGH-RESOLUTION (RED) LANDMARKS", vc.name);
+            write_png(dir / "figures" / ("slices_" + vc.name + "_high_resolution.png"),
+                      render_orthogonal_slices(intensity, labels, dataset.roles, vc.truth, run.high_resolution_landmarks, figure).image());
+            const ImageGeometry& g = rest_labels.geometry;
+            const SampledField field = sample_displacement_field(fine.mesh, difference, g);
+            ScalarImage heat{g, std::vector<float>(field.inside.size(), std::numeric_limits<float>::quiet_NaN())};
+            for (std::size_t v = 0; v < field.inside.size(); ++v)
+                if (field.inside[v]) heat.values[v] = static_cast<float>(Vec3(field.field.components[3 * v], field.field.components[3 * v + 1], field.field.components[3 * v + 2]).norm());
+            const ScalarImage rest_intensity = read_scalar_image(dataset.path(dataset.state("rest").files.at("intensity")));
+            const LabelVolume rest_label_image = rest_labels;
+            figure.heat = &heat;
+            figure.heat_max = std::max(0.05, std::ceil(largest * 20.0) / 20.0);
+            figure.heat_label = "DIFFERENCE, MM";
+            figure.title = fmt::format("{}: DISPLACEMENT DIFFERENCE, REST CONFIGURATION (MAX {:.2f} MM)", vc.name, largest);
+            write_png(dir / "figures" / ("difference_" + vc.name + ".png"),
+                      render_orthogonal_slices(rest_intensity, rest_label_image, dataset.roles, {}, {}, figure).image());
+            per_state[vc.name] = {{"max_difference_high_resolution_vs_coarse_to_fine_mm", largest},
+                                  {"matched_conditions", run.last_match.conditions.size()},
+                                  {"outside_database_range", run.last_match.outside_range}};
+        }
         bar.finish();
-        const nlohmann::json simulation = write_simulation_outputs(indentation, simulated);
-        long iterations = 0;
-        for (const auto& e : simulated.equilibria) iterations += e.iterations;
+        const double registration_s = seconds_since(t);
 
-        step(8, "phantom experiment dataset (CIRS-057A-like anatomy, small preset; `physreg phantom` makes the full one)");
-        ProgressDisplay phantom_bar("phantom");
-        const auto dataset = nlohmann::json::parse(
-            generate_phantom_dataset(PhantomSpec::preset_spec("small"), dir / "phantom", true,
-                                     [&](double f, const std::string& m) { phantom_bar.update(f, m); })
-                .summary_json);
-        phantom_bar.finish();
+        step(6, "TRE chart → figures/tre.png");
+        std::vector<TreSeries> series;
+        for (const auto& m : methods) series.push_back({m.name.substr(0, m.name.find(' ')) == "high-resolution" ? "HIGH-RES" : m.name.substr(0, m.name.find(' ')),
+                                                        pool_tre(m.tre)});
+        write_png(dir / "figures" / "tre.png", render_tre_chart(series, "TRE ON VALIDATION COMPRESSIONS D, E"));
 
-        nlohmann::json summary = {
-            {"output_directory", dir.string()},
-            {"label_volume", to_json(phantom.labels.geometry)},
-            {"voxel_mesh", mesh_summary(voxel.mesh, &tissues)},
-            {"fine_mesh", mesh_summary(fine.mesh, &tissues)},
-            {"coarse_mesh", mesh_summary(coarse.mesh, &tissues)},
-            {"fine_nodes_outside_coarse_mesh", outside},
-            {"surface_triangles", surfaces.triangles.size()},
-            {"tetrahedra", tets.cell_count()},
-            {"landmarks", located},
-            {"indentation", simulation},
-            {"phantom_dataset", {{"directory", (dir / "phantom").string()}, {"states", dataset["states"].size()},
-                                 {"ground_truth_nodes", dataset["ground_truth"]["nodes"]},
-                                 {"ground_truth_elements", dataset["ground_truth"]["elements"]},
-                                 {"seconds", dataset["timings"]["total_s"]}}},
-            {"timings_ms", {{"phantom", phantom_ms}, {"voxel_mesh", voxel_ms}, {"grid_mesh", grid_ms},
-                            {"coarsen_and_embed", coarse_ms}, {"surfaces_and_tetrahedra", surface_ms}}}};
-        write_atomically(dir / "summary.json", [&](const fs::path& tmp) {
-            std::ofstream(tmp) << summary.dump(2) << "\n";
-        });
-        if (o->json) {
-            std::cout << summary.dump(2) << std::endl;
-            return;
+        step(7, "summary");
+        json table = json::array();
+        std::string text = fmt::format("\nphysreg demo — {} phantom, validation compressions D and E ({} landmarks each), {} threads\n\n", preset,
+                                       rest_landmarks.size(), omp_get_max_threads());
+        text += fmt::format("{:<32}{:>26}{:>16}   {}\n", "method", "TRE all/surface/internal", "ms per update", "paper 000 (all/surface/internal, time)");
+        for (const auto& m : methods) {
+            const TreReport r = pool_tre(m.tre);
+            const double ms = std::accumulate(m.ms.begin(), m.ms.end(), 0.0) / double(m.ms.size());
+            text += fmt::format("{:<32}{:>8.2f} /{:>6.2f} /{:>6.2f} mm{:>13.1f}   {}\n", m.name, r.all.mean_mm, r.surface.mean_mm, r.internal.mean_mm, ms, m.paper);
+            table.push_back({{"method", m.name}, {"tre", json::parse(tre_stats_json(r))}, {"ms_per_update", ms},
+                             {"paper_000", {{"tre_all_mm", m.paper_all}, {"tre_surface_mm", m.paper_surface}, {"tre_internal_mm", m.paper_internal}, {"ms_per_frame", m.paper_ms}}}});
         }
-        auto volume = [](const VolumeMesh& m) { return measure_quality(m).volume_mm3 / 1000.0; };
-        std::cout << fmt::format("\nphysreg demo — synthetic liver ({} × {} × {} voxels of {} mm)\n\n",
-                                 phantom.labels.geometry.size[0], phantom.labels.geometry.size[1],
-                                 phantom.labels.geometry.size[2], o->voxel_mm)
-                  << fmt::format("{:<28}{:>10}{:>12}{:>14}{:>12}\n", "mesh", "nodes", "hexahedra", "volume (ml)", "time (ms)")
-                  << fmt::format("{:<28}{:>10}{:>12}{:>14.1f}{:>12.1f}\n", "one per voxel", voxel.mesh.node_count(),
-                                 voxel.mesh.cell_count(), volume(voxel.mesh), voxel_ms)
-                  << fmt::format("{:<28}{:>10}{:>12}{:>14.1f}{:>12.1f}\n", "grid " + o->grid, fine.mesh.node_count(),
-                                 fine.mesh.cell_count(), volume(fine.mesh), grid_ms)
-                  << fmt::format("{:<28}{:>10}{:>12}{:>14.1f}{:>12.1f}\n", "coarse " + o->coarse, coarse.mesh.node_count(),
-                                 coarse.mesh.cell_count(), volume(coarse.mesh), coarse_ms)
-                  << fmt::format("\n{} surface triangles, {} tetrahedra, {} of {} fine nodes outside the coarse mesh\n",
-                                 surfaces.triangles.size(), tets.cell_count(), outside, coarse.fine_nodes.size())
-                  << fmt::format("TLED indentation (coarse model, Neo-Hookean, 10 mm sphere travel): {} iterations of dynamic "
-                                 "relaxation over 4 tool positions, {:.1f} s, max displacement {:.2f} mm\n",
-                                 iterations, simulated.seconds, simulation["max_displacement_mm"].get<double>())
-                  << fmt::format("phantom dataset (small preset): {} states with ground truth, landmarks, partial surfaces and "
-                                 "pictures in '{}', {:.1f} s\n",
-                                 dataset["states"].size(), (dir / "phantom").string(), dataset["timings"]["total_s"].get<double>())
-                  << fmt::format("outputs in '{}' (open the .vtu files and indentation/frames.pvd in ParaView, labels.nii.gz, "
-                                 "landmarks.mrk.json and indentation/displacement_field.nii.gz in 3D Slicer)\n",
-                                 dir.string());
+        const double total_s = seconds_since(start);
+        text += fmt::format("\nfitted k_c,s-t = {:.4g} N/m, k_c,s-v = {:.4g} N/m (paper 000: 600, 500); training TRE {:.3f} mm (paper 2.00), validation "
+                            "{:.3f} mm (paper 2.55)\n",
+                            fit.fitted.coupling.parenchyma_tumour_n_per_m, fit.fitted.coupling.parenchyma_vessel_n_per_m, fit.train_pooled.all.mean_mm,
+                            fit.validation_pooled.all.mean_mm);
+        text += fmt::format("landmarks left at rest (how far D, E moved them): {:.3f} mm; enrichment database {} conditions, {:.1f} MB, blend {}\n",
+                            fit.validation_at_rest.all.mean_mm, db.conditions.size(), double(database_bytes) / 1e6, blend);
+        text += fmt::format("time: phantom {:.0f} s{}, estimation {:.0f} s, database {:.0f} s, registration {:.0f} s; total {:.0f} s\n", phantom_s,
+                            reuse ? " (reused)" : "", estimate_s, database_s, registration_s, total_s);
+        text += fmt::format("outputs in '{}': registration/*.vtu (ParaView), figures/*.png, params.json, enrichment.phe, phantom/ (3D Slicer: "
+                            "images, fields, landmarks)\n", dir.string());
+        json summary = {{"preset", preset},
+                        {"methods", table},
+                        {"fitted", parameters_json(fit.fitted)},
+                        {"train_tre", json::parse(tre_stats_json(fit.train_pooled))},
+                        {"validation_tre", json::parse(tre_stats_json(fit.validation_pooled))},
+                        {"validation_landmarks_at_rest", json::parse(tre_stats_json(fit.validation_at_rest))},
+                        {"database", {{"conditions", db.conditions.size()}, {"bytes", database_bytes}, {"blend", blend}}},
+                        {"per_state", per_state},
+                        {"meshing_blocks", blocks},
+                        {"seconds", {{"phantom", phantom_s}, {"phantom_reused", reuse}, {"estimation", estimate_s}, {"database", database_s},
+                                     {"registration", registration_s}, {"total", total_s}}}};
+        write_atomically(dir / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
+        if (o->json) std::cout << summary.dump(2) << std::endl;
+        else std::cout << text;
     });
 }
 

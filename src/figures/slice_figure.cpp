@@ -20,6 +20,19 @@ Rgb role_colour(const std::string& role)
     return {160, 160, 255};
 }
 
+// A perceptually ordered map: dark blue → magenta → red → yellow, t ∈ [0, 1].
+Rgb heat_colour(double t)
+{
+    t = std::clamp(t, 0.0, 1.0);
+    const double stops[4][3] = {{20, 20, 120}, {180, 30, 140}, {240, 60, 30}, {255, 240, 60}};
+    const double x = t * 3.0;
+    const int i = std::min(2, static_cast<int>(x));
+    const double f = x - i;
+    Rgb c;
+    for (int k = 0; k < 3; ++k) c[k] = static_cast<std::uint8_t>(stops[i][k] + f * (stops[i + 1][k] - stops[i][k]));
+    return c;
+}
+
 } // namespace
 
 Canvas render_orthogonal_slices(const ScalarImage& intensity, const LabelVolume& labels, const LabelRoles& roles,
@@ -28,6 +41,9 @@ Canvas render_orthogonal_slices(const ScalarImage& intensity, const LabelVolume&
     const auto& g = labels.geometry;
     if (intensity.geometry.size != g.size) fail("slice figure: intensity and label images differ in size");
     if (!(options.pixels_per_mm > 0.0) || options.pixels_per_mm > 20.0) fail("slice figure: {} pixels per mm", options.pixels_per_mm);
+    if (options.heat && options.heat->geometry.size != g.size) fail("slice figure: the colour map and the label image differ in size");
+    if (options.heat && !(options.heat_max > 0)) fail("slice figure: colour map maximum must be > 0");
+    const int bar_height = options.heat ? 40 : 0;
     // Physical bounding box of the image.
     Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
     for (int corner = 0; corner < 8; ++corner) {
@@ -60,7 +76,7 @@ Canvas render_orthogonal_slices(const ScalarImage& intensity, const LabelVolume&
         width += static_cast<int>(std::ceil((hi[p.h] - lo[p.h]) * s)) + gap;
         height = std::max(height, static_cast<int>(std::ceil((hi[p.v] - lo[p.v]) * s)));
     }
-    Canvas canvas(width, height + title_height + 2 * gap, {20, 20, 20});
+    Canvas canvas(width, height + title_height + 2 * gap + bar_height, {20, 20, 20});
     canvas.text(gap, 6, options.title, {255, 255, 255}, 2);
     std::map<std::string, const Landmark*> predicted_by_name;
     for (const auto& l : predicted) predicted_by_name[l.name] = &l;
@@ -85,6 +101,13 @@ Canvas render_orthogonal_slices(const ScalarImage& intensity, const LabelVolume&
             for (int px = 0; px < w; ++px) {
                 const long v = index[static_cast<std::size_t>(py) * w + px];
                 if (v < 0) continue;
+                if (options.heat) {
+                    const float value = options.heat->values[static_cast<std::size_t>(v)];
+                    if (std::isfinite(value)) {
+                        canvas.set(x0 + px, y0 + py, heat_colour(double(value) / options.heat_max));
+                        continue;
+                    }
+                }
                 const auto grey = static_cast<std::uint8_t>(std::clamp(255.0f * intensity.values[static_cast<std::size_t>(v)] / white, 0.f, 255.f));
                 canvas.set(x0 + px, y0 + py, {grey, grey, grey});
             }
@@ -119,6 +142,17 @@ Canvas render_orthogonal_slices(const ScalarImage& intensity, const LabelVolume&
         }
         canvas.text(x0 + 4, y0 + 4, p.name, {255, 255, 255}, 1);
         x0 += w + gap;
+    }
+    if (options.heat) {
+        // Colour bar with its scale under the panels.
+        const int y = title_height + 2 * gap + height + 4, bar_w = std::min(400, width - 2 * gap - 160);
+        for (int px = 0; px < bar_w; ++px) canvas.fill_rect(gap + px, y, gap + px, y + 12, heat_colour(double(px) / double(bar_w - 1)));
+        for (int t = 0; t <= 4; ++t) {
+            const int px = gap + t * (bar_w - 1) / 4;
+            canvas.line(px, y + 12, px, y + 16, {255, 255, 255});
+            canvas.text(px - 8, y + 19, fmt::format("{:.2g}", options.heat_max * t / 4.0), {255, 255, 255});
+        }
+        canvas.text(gap + bar_w + 12, y + 3, options.heat_label, {255, 255, 255});
     }
     return canvas;
 }

@@ -152,4 +152,38 @@ CoarseToFinePrediction predict_coarse_to_fine(const LiverModel& fine, const Live
     return out;
 }
 
+TrackingRun track_compression(const LiverModel& fine, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
+                              const EnrichmentDatabase& db, const Indenter& tool, const LandmarkSet& rest_landmarks, int steps,
+                              EnrichmentMatching how, int k, const PredictionOptions& options, const std::string& what,
+                              const std::function<void(int)>& on_step)
+{
+    if (steps < 1) fail("{}: steps must be ≥ 1 (got {})", what, steps);
+    using clock = std::chrono::steady_clock;
+    const Vec3 start = tool.path.front(), end = tool.path.back();
+    const double depth = (end - start).norm();
+    const Vec3 d = (end - start) / depth;
+    CompressionTracker high(fine, tool, options), low(coarse, tool, options);
+    TrackingRun run;
+    for (int s = 1; s <= steps; ++s) {
+        const Vec3 position = start + depth * double(s) / double(steps) * d;
+        const std::string step = fmt::format("{} step {}", what, s);
+        const auto h = high.move_to(position, step + " (high resolution)");
+        run.high_resolution_ms.push_back(1e3 * h.seconds);
+        run.high_resolution_iterations.push_back(h.iterations);
+        const auto t0 = clock::now();
+        const auto l = low.move_to(position, step + " (coarse)");
+        const auto cu = low.displacement_mm();
+        const EnrichmentCondition query{"", start, d, depth * double(s) / double(steps)};
+        run.last_match = match_enrichment(db, how, k, &query, cu);
+        run.coarse_to_fine_u = synthesize_fine_displacement(coarse.mesh, cu, fine_nodes, fine.mesh.nodes, blended_weights(db, run.last_match));
+        run.coarse_to_fine_landmarks = move_landmarks(fine, run.coarse_to_fine_u, rest_landmarks);
+        run.coarse_to_fine_ms.push_back(1e3 * std::chrono::duration<double>(clock::now() - t0).count());
+        run.coarse_iterations.push_back(l.iterations);
+        if (on_step) on_step(s);
+    }
+    run.high_resolution_u = high.displacement_mm();
+    run.high_resolution_landmarks = move_landmarks(fine, run.high_resolution_u, rest_landmarks);
+    return run;
+}
+
 } // namespace physreg

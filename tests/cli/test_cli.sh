@@ -38,12 +38,17 @@ for sub in mesh coarsen info convert demo phantom estimate register-compression 
 done
 
 # The main job on the built-in phantom.
-expect_ok "demo" "$physreg" --log-level warn demo -o "$work/demo"
-for f in labels.nii.gz tissues.yaml landmarks.csv landmarks.mrk.json landmarks.fcsv mesh_voxels.vtu \
-         mesh_fine.vtu mesh_coarse.vtu surfaces_fine.ply boundary_fine.stl tetrahedra_fine.vtu summary.json; do
+expect_ok "demo --quick" "$physreg" --log-level warn demo --quick -o "$work/demo"
+grep -q "coarse-to-fine" "$work/out.txt" && grep -q "paper 000" "$work/out.txt" && pass || failed "demo prints the TRE table beside paper 000"
+for f in summary.json params.json enrichment.phe figures/tre.png figures/difference_D.png figures/slices_E_coarse_to_fine.png \
+         registration/D_fine.vtu registration/E_homogeneous.vtu registration/D_landmarks_coarse_to_fine.csv phantom/manifest.json; do
   expect_file "$work/demo/$f"
 done
-d="$work/demo"
+for f in labels.nii.gz tissues.yaml landmarks.csv landmarks.mrk.json landmarks.fcsv mesh_voxels.vtu \
+         mesh_fine.vtu mesh_coarse.vtu surfaces_fine.ply boundary_fine.stl tetrahedra_fine.vtu; do
+  expect_file "$work/demo/meshing/$f"
+done
+d="$work/demo/meshing"
 
 # mesh + info + coarsen + landmarks + convert on the demo's label volume.
 expect_ok "mesh" "$physreg" mesh "$d/labels.nii.gz" --tissues "$d/tissues.yaml" --grid 40x30x20 -o "$work/m.vtu" \

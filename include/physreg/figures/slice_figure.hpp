@@ -14,6 +14,12 @@ struct SliceFigureOptions {
     double pixels_per_mm = 2.0;
     double landmark_slab_mm = 8.0;  ///< landmarks within this distance of a plane are drawn on it
     std::string title;
+    /// Optional scalar map on the intensity's grid (e.g. a displacement difference, mm), drawn in
+    /// colour (dark blue → red → yellow, 0 … heat_max) where finite, with a colour bar; NaN voxels
+    /// show the grey intensity.
+    const ScalarImage* heat = nullptr;
+    double heat_max = 1.0;
+    std::string heat_label = "MM";
 };
 
 /// Three panels: axial (z = const; x right, anterior up), coronal (y = const; x right, superior

@@ -147,6 +147,22 @@ CoarseToFinePrediction predict_coarse_to_fine(const LiverModel& fine, const Live
                                               const EnrichmentDatabase& db, const Indenter& tool, const LandmarkSet& rest_landmarks,
                                               EnrichmentMatching how, int k, const PredictionOptions& options, const std::string& what);
 
+/// A compression followed as `steps` tool positions from first contact to the final depth, each
+/// update warm-started from the previous one, with the high-resolution model and coarse-to-fine
+/// (coarse equilibrium + matching + synthesis of every fine node and landmark): wall time per update
+/// and the landmarks at the final depth.
+struct TrackingRun {
+    std::vector<double> high_resolution_ms, coarse_to_fine_ms;
+    std::vector<long> high_resolution_iterations, coarse_iterations;
+    LandmarkSet high_resolution_landmarks, coarse_to_fine_landmarks; ///< at the final depth
+    std::vector<double> high_resolution_u, coarse_to_fine_u;         ///< fine displacements at the final depth, mm
+    EnrichmentMatch last_match;
+};
+TrackingRun track_compression(const LiverModel& fine, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
+                              const EnrichmentDatabase& db, const Indenter& tool, const LandmarkSet& rest_landmarks, int steps,
+                              EnrichmentMatching how, int k, const PredictionOptions& options, const std::string& what,
+                              const std::function<void(int)>& on_step = {});
+
 /// Atomic write (temporary name, then rename).
 void write_enrichment_database(const std::filesystem::path& path, const EnrichmentDatabase& database);
 /// Throws Error naming the file for a wrong magic or version, a truncated file, a checksum
