@@ -122,7 +122,7 @@ void add_subcommand_enrich(CLI::App& app)
     add_model_options(build, b->model);
     build->add_option("--coarse-grid", b->coarse_grid, "Coarse model cells over the liver (default 24x18x18, paper 000)");
     build->add_option("--positions", b->positions, "Compressions of the dataset whose entry points are used (default: all)");
-    build->add_option("--depths", b->depths, "Tool depths beyond first contact, mm, increasing (default: 2 mm steps to 1.25× the deepest compression)");
+    build->add_option("--depths", b->depths, "Tool depths beyond first contact, mm, increasing (default: 2 mm steps to the deepest compression)");
     build->add_option("--depth-count", b->depth_count, "Instead of --depths: this many depths evenly up to --max-depth");
     build->add_option("--max-depth", b->max_depth, "With --depth-count: the deepest, mm");
     build->add_option("--orientations", b->orientations, "Pressing directions per position: the nominal one and N−1 tilted ones (default 1)");
@@ -164,7 +164,7 @@ void add_subcommand_enrich(CLI::App& app)
             if (!(b->max_depth > 0)) fail("--depth-count needs --max-depth > 0 mm");
             for (int i = 1; i <= b->depth_count; ++i) plan.depths_mm.push_back(b->max_depth * i / b->depth_count);
         } else {
-            for (double d = 2.0; d <= 1.25 * deepest + 1e-9; d += 2.0) plan.depths_mm.push_back(d);
+            for (double d = 2.0; d <= deepest + 1e-9; d += 2.0) plan.depths_mm.push_back(d);
         }
         plan.orientations = b->orientations;
         plan.tilt_deg = b->tilt;

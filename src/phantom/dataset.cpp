@@ -1021,6 +1021,8 @@ PhantomDataset read_phantom_dataset(const fs::path& directory)
         d.generator_version = m.at("generator").at("version").get<std::string>();
         d.seed = m.at("generator").at("seed").get<std::uint64_t>();
         d.preset = m.at("generator").at("preset").get<std::string>();
+        const auto requested = m.at("ground_truth").at("liver_grid_requested").get<std::vector<std::int64_t>>();
+        if (requested.size() == 3) d.ground_truth_grid = {requested[0], requested[1], requested[2]};
         const auto& r = m.at("label_roles");
         d.roles.body = r.at("body").get<std::set<std::int32_t>>();
         d.roles.liver = r.at("liver").get<std::set<std::int32_t>>();

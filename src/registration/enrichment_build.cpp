@@ -132,7 +132,7 @@ EnrichmentDatabase build_sequence(const LiverModel& fine, const LiverModel& coar
             try {
                 s = solver.solve_equilibrium(o, double(i + 1) / steps);
             } catch (const Error& e) {
-                fail("{}: {}", what, e.what());
+                fail("{}: {} (drop this depth or position from the plan, or lower --tool-speed)", what, e.what());
             }
             if (!s.converged()) fail("{}: {}", what, s.message);
             return solver.displacement_mm();

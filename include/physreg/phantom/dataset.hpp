@@ -108,6 +108,7 @@ struct PhantomDataset {
     std::string generator_version;
     std::uint64_t seed = 0;
     std::string preset;
+    Index3 ground_truth_grid{0, 0, 0};             ///< cells over the liver requested for the ground truth
     LabelRoles roles;
     std::string tissues_file;                      ///< relative: the ground-truth model's tissue table
     std::vector<DatasetState> states;              ///< rest first
