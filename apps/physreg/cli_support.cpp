@@ -1,5 +1,7 @@
 #include "cli_support.hpp"
 
+#include <sstream>
+
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 
@@ -85,6 +87,24 @@ void check_output_path(const std::filesystem::path& path, const std::string& opt
     const auto dir = path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
     if (!std::filesystem::is_directory(dir))
         fail("{} '{}': directory '{}' does not exist", option, path.string(), dir.string());
+}
+
+std::vector<double> parse_number_list(const std::string& text, const std::string& option)
+{
+    std::stringstream in(text);
+    std::string item;
+    std::vector<double> v;
+    while (std::getline(in, item, ',')) {
+        try {
+            std::size_t used = 0;
+            v.push_back(std::stod(item, &used));
+            if (used != item.size()) throw std::invalid_argument(item);
+        } catch (const std::logic_error&) {
+            fail("{}: '{}' is not a number", option, item);
+        }
+    }
+    if (v.empty()) fail("{}: empty list", option);
+    return v;
 }
 
 } // namespace physreg::cli

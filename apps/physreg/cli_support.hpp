@@ -43,6 +43,8 @@ void report(const CommonOptions& options, const nlohmann::json& summary);
 /// The tissue table from --tissues, or paper 000's default (labels 1, 2, 3) with a log line.
 TissueTable load_tissues(const std::string& path);
 
+/// "1,2.5,3" → numbers; Error naming `option` for an empty list or an item that is not a number.
+std::vector<double> parse_number_list(const std::string& text, const std::string& option);
 /// Fails unless the output's directory exists (checked before any work is done).
 void check_output_path(const std::filesystem::path& path, const std::string& option);
 

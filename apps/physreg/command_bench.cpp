@@ -64,13 +64,10 @@ void add_subcommand_bench(CLI::App& app)
         const EnrichmentMatching how = parse_enrichment_matching(o->match);
         const EnrichmentDatabase db = read_enrichment_database(o->database);
         const LoadedModel loaded = load_model(o->dataset, o->parameters, o->model);
-        const auto g = json::parse(db.model_json).at("coarse_grid").get<std::vector<std::int64_t>>();
         std::vector<NodeEmbedding> embedding;
-        const LiverModel coarse = coarsen_liver_model(loaded.model, {g.at(0), g.at(1), g.at(2)}, &embedding);
+        const LiverModel coarse = coarsen_liver_model(loaded.model, db.coarse_grid(), &embedding);
         check_database_fits(db, loaded.model, coarse, "--database '" + o->database + "'");
-        int k = 1;
-        if (o->blend == "auto") k = choose_blend_size(db, coarse.mesh, embedding, loaded.model.mesh.nodes, 4);
-        else k = std::max(1, std::stoi(o->blend));
+        const int k = blend_size(o->blend, db, coarse, embedding, loaded.model);
         const auto cases = compression_cases(loaded.dataset, split_names(o->states, "--states"));
         const PredictionOptions options = prediction_options(o->model);
         json report;

@@ -79,27 +79,6 @@ private:
     int m_rank = 0, m_size = 1;
 };
 
-std::vector<double> parse_numbers(const std::string& text, const std::string& option)
-{
-    std::vector<double> v;
-    for (const auto& item : split_names(text, option)) {
-        try {
-            std::size_t used = 0;
-            v.push_back(std::stod(item, &used));
-            if (used != item.size()) throw std::invalid_argument(item);
-        } catch (const std::logic_error&) {
-            fail("{}: '{}' is not a number", option, item);
-        }
-    }
-    return v;
-}
-
-Index3 coarse_grid_of(const EnrichmentDatabase& db)
-{
-    const auto g = json::parse(db.model_json).at("coarse_grid").get<std::vector<std::int64_t>>();
-    return {g.at(0), g.at(1), g.at(2)};
-}
-
 } // namespace
 
 void add_subcommand_enrich(CLI::App& app)
@@ -159,7 +138,7 @@ void add_subcommand_enrich(CLI::App& app)
         }
         const Indenter shape = *loaded.dataset.state(names.front()).tool;
         if (!b->depths.empty()) {
-            plan.depths_mm = parse_numbers(b->depths, "--depths");
+            plan.depths_mm = parse_number_list(b->depths, "--depths");
         } else if (b->depth_count > 0) {
             if (!(b->max_depth > 0)) fail("--depth-count needs --max-depth > 0 mm");
             for (int i = 1; i <= b->depth_count; ++i) plan.depths_mm.push_back(b->max_depth * i / b->depth_count);
@@ -258,21 +237,11 @@ void add_subcommand_enrich(CLI::App& app)
         const EnrichmentDatabase db = read_enrichment_database(a->database);
         const LoadedModel loaded = load_model(a->dataset, a->parameters, a->model);
         std::vector<NodeEmbedding> embedding;
-        const LiverModel coarse = coarsen_liver_model(loaded.model, coarse_grid_of(db), &embedding);
+        const LiverModel coarse = coarsen_liver_model(loaded.model, db.coarse_grid(), &embedding);
         check_database_fits(db, loaded.model, coarse, "--database '" + a->database + "'");
         const auto cases = compression_cases(loaded.dataset, {a->state});
         std::vector<double> loo;
-        int k = 0;
-        if (a->blend == "auto") {
-            k = choose_blend_size(db, coarse.mesh, embedding, loaded.model.mesh.nodes, 4, &loo);
-        } else {
-            try {
-                k = std::stoi(a->blend);
-            } catch (const std::logic_error&) {
-                fail("--blend: '{}' is neither auto nor a number", a->blend);
-            }
-            if (k < 1) fail("--blend must be ≥ 1 (got {})", k);
-        }
+        const int k = blend_size(a->blend, db, coarse, embedding, loaded.model, &loo);
         StagedDirectory staging(a->output, a->replace);
         const auto prediction = predict_coarse_to_fine(loaded.model, coarse, embedding, db, cases[0].tool, loaded.rest_landmarks, how, k,
                                                        prediction_options(a->model), "compression " + a->state);

@@ -14,27 +14,9 @@
 namespace physreg::cli {
 namespace {
 
-std::vector<double> parse_list(const std::string& text, const std::string& option)
-{
-    std::stringstream in(text);
-    std::string item;
-    std::vector<double> v;
-    while (std::getline(in, item, ',')) {
-        try {
-            std::size_t used = 0;
-            v.push_back(std::stod(item, &used));
-            if (used != item.size()) throw std::invalid_argument(item);
-        } catch (const std::logic_error&) {
-            fail("{}: '{}' is not a number", option, item);
-        }
-    }
-    if (v.empty()) fail("{}: empty list", option);
-    return v;
-}
-
 Vec3 parse_vector(const std::string& text, const std::string& option)
 {
-    const auto v = parse_list(text, option);
+    const auto v = parse_number_list(text, option);
     if (v.size() != 3) fail("{}: '{}' is not three comma-separated numbers", option, text);
     const Vec3 out(v[0], v[1], v[2]);
     if (!out.allFinite()) fail("{}: '{}' is not finite", option, text);
@@ -97,7 +79,7 @@ void add_subcommand_phantom(CLI::App& app)
         }
         if (!o->grid.empty()) spec.ground_truth_grid = parse_grid_dims(o->grid, "--ground-truth-grid");
         spec.materials = parse_material_set(o->materials);
-        if (!o->depths.empty()) spec.depths_mm = parse_list(o->depths, "--depths");
+        if (!o->depths.empty()) spec.depths_mm = parse_number_list(o->depths, "--depths");
         spec.tool.shape = parse_indenter_shape(o->tool);
         if (spec.tool.shape == IndenterShape::plane) fail("--tool: a plane has no position over the liver; use sphere, cylinder or box");
         if (o->tool_radius) spec.tool.radius_mm = *o->tool_radius;
@@ -112,7 +94,7 @@ void add_subcommand_phantom(CLI::App& app)
             std::vector<std::string> parts;
             while (std::getline(in, item, ':')) parts.push_back(item);
             if (parts.size() != 4 || parts[0].empty()) fail("--compression: '{}' is not NAME:X:Z:DEPTH", text);
-            const auto numbers = parse_list(parts[1] + "," + parts[2] + "," + parts[3], "--compression " + parts[0]);
+            const auto numbers = parse_number_list(parts[1] + "," + parts[2] + "," + parts[3], "--compression " + parts[0]);
             CompressionSpec c;
             c.name = parts[0];
             c.x_mm = numbers[0];

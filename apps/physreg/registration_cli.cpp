@@ -102,4 +102,20 @@ LoadedModel load_model(const std::string& dataset, const std::string& parameters
     return out;
 }
 
+int blend_size(const std::string& text, const EnrichmentDatabase& db, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
+               const LiverModel& fine, std::vector<double>* loo_mm)
+{
+    if (text == "auto") return choose_blend_size(db, coarse.mesh, fine_nodes, fine.mesh.nodes, 4, loo_mm);
+    int k = 0;
+    try {
+        std::size_t used = 0;
+        k = std::stoi(text, &used);
+        if (used != text.size()) throw std::invalid_argument(text);
+    } catch (const std::logic_error&) {
+        fail("--blend: '{}' is neither auto nor a number", text);
+    }
+    if (k < 1) fail("--blend must be ≥ 1 (got {})", k);
+    return k;
+}
+
 } // namespace physreg::cli

@@ -6,6 +6,7 @@
 
 #include "physreg/evaluation/tre.hpp"
 #include "physreg/phantom/dataset.hpp"
+#include "physreg/registration/enrichment.hpp"
 #include "physreg/registration/liver_model.hpp"
 
 #include <optional>
@@ -29,6 +30,11 @@ ModelParameters model_parameters(const ModelOptions& m, ModelParameters p);
 PredictionOptions prediction_options(const ModelOptions& m);
 nlohmann::json parameters_json(const ModelParameters& p);
 std::string tre_line(const TreReport& r);
+
+/// --blend: "auto" (leave-one-out best of 1…4 over the database; errors per size in `loo_mm`) or a
+/// number ≥ 1; Error otherwise.
+int blend_size(const std::string& text, const EnrichmentDatabase& db, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
+               const LiverModel& fine, std::vector<double>* loo_mm = nullptr);
 
 /// The dataset's rest state and the model: from `parameters_file` (checked against the mesh it
 /// builds: "fitted on another mesh") or from the model options.

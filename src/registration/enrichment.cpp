@@ -94,6 +94,16 @@ std::vector<double> synthesize_fine_displacement(const VolumeMesh& coarse, const
     return u;
 }
 
+Index3 EnrichmentDatabase::coarse_grid() const
+{
+    try {
+        const auto g = json::parse(model_json).at("coarse_grid").get<std::vector<std::int64_t>>();
+        if (g.size() == 3) return {g[0], g[1], g[2]};
+    } catch (const json::exception&) {
+    }
+    fail("enrichment database: its model parameters lack the coarse grid");
+}
+
 void EnrichmentDatabase::validate(const std::string& what) const
 {
     if (coarse_displacement.size() != conditions.size() || weights.size() != conditions.size())

@@ -133,6 +133,19 @@ int choose_blend_size(const EnrichmentDatabase& db, const VolumeMesh& coarse, co
     return 1 + static_cast<int>(std::min_element(error.begin(), error.end()) - error.begin());
 }
 
+namespace {
+
+// Run-time steps 2–4: matched conditions, their blended weights, every fine node synthesised.
+std::vector<double> match_and_synthesize(const EnrichmentDatabase& db, EnrichmentMatching how, int k, const EnrichmentCondition& query,
+                                         const LiverModel& coarse, const std::vector<double>& coarse_u, const std::vector<NodeEmbedding>& fine_nodes,
+                                         const LiverModel& fine, EnrichmentMatch& match)
+{
+    match = match_enrichment(db, how, k, &query, coarse_u);
+    return synthesize_fine_displacement(coarse.mesh, coarse_u, fine_nodes, fine.mesh.nodes, blended_weights(db, match));
+}
+
+} // namespace
+
 CoarseToFinePrediction predict_coarse_to_fine(const LiverModel& fine, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
                                               const EnrichmentDatabase& db, const Indenter& tool, const LandmarkSet& rest_landmarks,
                                               EnrichmentMatching how, int k, const PredictionOptions& options, const std::string& what)
@@ -145,8 +158,7 @@ CoarseToFinePrediction predict_coarse_to_fine(const LiverModel& fine, const Live
     const auto t0 = std::chrono::steady_clock::now();
     const EnrichmentCondition query{"", tool.path.front(), (tool.path.back() - tool.path.front()).normalized(),
                                     (tool.path.back() - tool.path.front()).norm()};
-    out.match = match_enrichment(db, how, k, &query, out.coarse_u);
-    out.fine_u = synthesize_fine_displacement(coarse.mesh, out.coarse_u, fine_nodes, fine.mesh.nodes, blended_weights(db, out.match));
+    out.fine_u = match_and_synthesize(db, how, k, query, coarse, out.coarse_u, fine_nodes, fine, out.match);
     out.synthesis_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     out.landmarks = move_landmarks(fine, out.fine_u, rest_landmarks);
     return out;
@@ -174,8 +186,7 @@ TrackingRun track_compression(const LiverModel& fine, const LiverModel& coarse, 
         const auto l = low.move_to(position, step + " (coarse)");
         const auto cu = low.displacement_mm();
         const EnrichmentCondition query{"", start, d, depth * double(s) / double(steps)};
-        run.last_match = match_enrichment(db, how, k, &query, cu);
-        run.coarse_to_fine_u = synthesize_fine_displacement(coarse.mesh, cu, fine_nodes, fine.mesh.nodes, blended_weights(db, run.last_match));
+        run.coarse_to_fine_u = match_and_synthesize(db, how, k, query, coarse, cu, fine_nodes, fine, run.last_match);
         run.coarse_to_fine_landmarks = move_landmarks(fine, run.coarse_to_fine_u, rest_landmarks);
         run.coarse_to_fine_ms.push_back(1e3 * std::chrono::duration<double>(clock::now() - t0).count());
         run.coarse_iterations.push_back(l.iterations);

@@ -51,6 +51,7 @@ struct EnrichmentDatabase {
     /// similarity) and the eq. 9 weights (8 per fine node).
     std::vector<std::vector<float>> coarse_displacement, weights;
     void validate(const std::string& what) const; ///< sizes consistent, values finite
+    Index3 coarse_grid() const;                       ///< the coarse model's grid, from model_json
 };
 
 /// Which conditions a database holds: positions × orientations × depths (paper 000: 5 × 20 × 50).
