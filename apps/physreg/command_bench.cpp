@@ -25,13 +25,18 @@ using nlohmann::json;
 
 namespace {
 
+double mean_of(const std::vector<double>& v)
+{
+    return std::accumulate(v.begin(), v.end(), 0.0) / double(v.size());
+}
+
 json timing_json(std::vector<double> ms, const std::vector<long>& iterations)
 {
-    const double mean = std::accumulate(ms.begin(), ms.end(), 0.0) / double(ms.size());
+    const double mean = mean_of(ms);
     std::sort(ms.begin(), ms.end());
     const double mean_iterations = std::accumulate(iterations.begin(), iterations.end(), 0.0) / double(iterations.size());
     return {{"mean_ms", mean}, {"median_ms", ms[ms.size() / 2]}, {"max_ms", ms.back()}, {"min_ms", ms.front()},
-            {"mean_iterations", mean_iterations}, {"updates", ms.size()}};
+            {"mean_iterations", mean_iterations}, {"ms_per_iteration", mean / mean_iterations}, {"updates", ms.size()}};
 }
 
 } // namespace
@@ -82,7 +87,7 @@ void add_subcommand_bench(CLI::App& app)
         report["database"] = {{"file", o->database}, {"conditions", db.conditions.size()}, {"match", o->match}, {"blend", k}};
         report["targets"] = {{"coarse_to_fine_ms", 10.0}, {"high_resolution_ms", 100.0}, {"tre_gap_mm", 0.5}};
         ProgressDisplay bar("bench enrich");
-        std::vector<double> all_hr, all_c2f;
+        std::vector<double> all_hr, all_c2f, all_coarse, all_synthesis;
         std::vector<TreReport> tre_hr, tre_c2f;
         for (std::size_t c = 0; c < cases.size(); ++c) {
             const double depth = (cases[c].tool.path.back() - cases[c].tool.path.front()).norm();
@@ -100,18 +105,23 @@ void add_subcommand_bench(CLI::App& app)
             const auto& it_c2f = run.coarse_iterations;
             all_hr.insert(all_hr.end(), ms_hr.begin(), ms_hr.end());
             all_c2f.insert(all_c2f.end(), ms_c2f.begin(), ms_c2f.end());
+            all_coarse.insert(all_coarse.end(), run.coarse_solve_ms.begin(), run.coarse_solve_ms.end());
+            all_synthesis.insert(all_synthesis.end(), run.synthesis_ms.begin(), run.synthesis_ms.end());
             report["compressions"][cases[c].name] = {{"depth_mm", depth},
                                                      {"high_resolution", timing_json(ms_hr, it_hr)},
                                                      {"coarse_to_fine", timing_json(ms_c2f, it_c2f)},
+                                                     {"coarse_to_fine_split_ms", {{"coarse_equilibrium", mean_of(run.coarse_solve_ms)},
+                                                                                  {"match_synthesis_landmarks", mean_of(run.synthesis_ms)}}},
                                                      {"tre_high_resolution", json::parse(tre_stats_json(tre_hr.back()))},
                                                      {"tre_coarse_to_fine", json::parse(tre_stats_json(tre_c2f.back()))}};
         }
         bar.finish();
         const TreReport hr = pool_tre(tre_hr), c2f = pool_tre(tre_c2f);
-        const double mean_hr = std::accumulate(all_hr.begin(), all_hr.end(), 0.0) / double(all_hr.size());
-        const double mean_c2f = std::accumulate(all_c2f.begin(), all_c2f.end(), 0.0) / double(all_c2f.size());
+        const double mean_hr = mean_of(all_hr), mean_c2f = mean_of(all_c2f);
         report["summary"] = {{"high_resolution_ms_per_update", mean_hr},
                              {"coarse_to_fine_ms_per_update", mean_c2f},
+                             {"coarse_to_fine_split_ms", {{"coarse_equilibrium", mean_of(all_coarse)},
+                                                          {"match_synthesis_landmarks", mean_of(all_synthesis)}}},
                              {"speed_up", mean_hr / mean_c2f},
                              {"tre_high_resolution", json::parse(tre_stats_json(hr))},
                              {"tre_coarse_to_fine", json::parse(tre_stats_json(c2f))},

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace physreg {
 
@@ -112,6 +113,17 @@ void Indenter::closest_surface_point(const Vec3& x, double s, Vec3& surface_poin
         return;
     }
     }
+}
+
+double Indenter::reach_mm() const
+{
+    switch (shape) {
+    case IndenterShape::sphere: return radius_mm;
+    case IndenterShape::box: return half_extents_mm.norm();
+    case IndenterShape::cylinder:
+    case IndenterShape::plane: return std::numeric_limits<double>::infinity();
+    }
+    return std::numeric_limits<double>::infinity();
 }
 
 void Indenter::validate() const

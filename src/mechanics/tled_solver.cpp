@@ -9,6 +9,7 @@
 #include <climits>
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 
 namespace physreg {
 namespace {
@@ -294,7 +295,7 @@ void TledSolver<Real>::constrain_with_active_set(Real* u, double load_factor, co
     m_contact_count = 0;
     for (std::size_t t = 0; t < m_loads.indenters.size(); ++t) {
         const Indenter& tool = m_loads.indenters[t];
-        for (auto node : m_model.surface_nodes()) {
+        for (auto node : m_contact_candidates[t]) {
             Real* un = u + 3 * static_cast<std::size_t>(node);
             const Real* xn = m_rest.data() + 3 * static_cast<std::size_t>(node);
             const Vec3 x(double(xn[0] + un[0]), double(xn[1] + un[1]), double(xn[2] + un[2]));
@@ -322,6 +323,50 @@ void TledSolver<Real>::constrain_with_active_set(Real* u, double load_factor, co
             m_contact_normal.push_back(normal);
         }
     }
+}
+
+// Surface nodes within the tool's reach (plus a margin) of the segment its reference point sweeps
+// between the two load factors; the margin is spent as nodes move (see solve_equilibrium).
+template <typename Real>
+void TledSolver<Real>::select_contact_candidates(const Real* u, double from_factor, double to_factor)
+{
+    const auto& surface = m_model.surface_nodes();
+    m_contact_candidates.assign(m_loads.indenters.size(), {});
+    double margin = std::numeric_limits<double>::infinity();
+    for (std::size_t t = 0; t < m_loads.indenters.size(); ++t) {
+        const Indenter& tool = m_loads.indenters[t];
+        const double reach = tool.reach_mm();
+        if (!std::isfinite(reach)) {
+            m_contact_candidates[t] = surface;
+            continue;
+        }
+        const double tool_margin = std::max(1.0, 0.25 * reach);
+        margin = std::min(margin, tool_margin);
+        // The reference point's path between the two factors: a polyline through the path vertices.
+        const double lo = std::min(from_factor, to_factor), hi = std::max(from_factor, to_factor);
+        std::vector<Vec3> polyline{tool.position(lo)};
+        const std::size_t segments = tool.path.size() > 1 ? tool.path.size() - 1 : 1;
+        for (std::size_t i = 1; i < segments; ++i) {
+            const double si = double(i) / double(segments);
+            if (si > lo && si < hi) polyline.push_back(tool.path[i]);
+        }
+        polyline.push_back(tool.position(hi));
+        const double limit = reach + tool_margin;
+        for (auto node : surface) {
+            const Real* un = u + 3 * static_cast<std::size_t>(node);
+            const Real* xn = m_rest.data() + 3 * static_cast<std::size_t>(node);
+            const Vec3 x(double(xn[0] + un[0]), double(xn[1] + un[1]), double(xn[2] + un[2]));
+            double distance = std::numeric_limits<double>::infinity();
+            for (std::size_t i = 0; i + 1 < polyline.size(); ++i) {
+                const Vec3 a = polyline[i], ab = polyline[i + 1] - a;
+                const double length2 = ab.squaredNorm();
+                const double along = length2 > 0 ? std::clamp((x - a).dot(ab) / length2, 0.0, 1.0) : 0.0;
+                distance = std::min(distance, (x - a - along * ab).norm());
+            }
+            if (distance <= limit) m_contact_candidates[t].push_back(node);
+        }
+    }
+    m_candidate_slack = margin;
 }
 
 template <typename Real>
@@ -498,6 +543,7 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
         return ramp == 0 ? load_factor : start_factor + (load_factor - start_factor) * smooth_step(double(iteration) / double(ramp));
     };
     constrain(m_u.data(), factor_at(0), true);
+    select_contact_candidates(m_u.data(), start_factor, load_factor);
     m_active_tool.assign(m_n, -1);
     for (auto node : m_contact_normal_node) m_active_tool[node] = 0;
     if (m_loads.indenters.size() != 1) std::fill(m_active_tool.begin(), m_active_tool.end(), -1);
@@ -511,9 +557,11 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
     std::vector<double> num(blocks), den(blocks);
     // Contact dofs: the normal component of the residual is the contact reaction.
     std::vector<std::uint8_t> in_contact(m_n, 0);
+    std::vector<std::int32_t> flagged; // the nodes in_contact marks: cleared one by one, not the whole array
     auto refresh_contact = [&] {
-        std::fill(in_contact.begin(), in_contact.end(), 0);
-        for (auto node : m_contact_normal_node) in_contact[node] = 1;
+        for (auto node : flagged) in_contact[node] = 0;
+        flagged = m_contact_normal_node;
+        for (auto node : flagged) in_contact[node] = 1;
     };
     refresh_contact();
     for (long iteration = 1; iteration <= options.max_iterations; ++iteration) {
@@ -587,6 +635,10 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
             for (int d = 0; d < 3; ++d) m_u_prev[3 * node + d] = static_cast<Real>(double(m_u[3 * node + d]) - tangential[d]);
         }
 
+        // No node has moved farther than √3 × the largest component increment: once the candidates'
+        // margin is used up, select them again around the current shape.
+        m_candidate_slack -= std::sqrt(3.0) * increment;
+        if (m_candidate_slack < 0) select_contact_candidates(m_u.data(), start_factor, load_factor);
         increment_history.push_back(increment);
         double rho = 1.0;
         const std::size_t window = 20;

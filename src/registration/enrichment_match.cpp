@@ -185,10 +185,14 @@ TrackingRun track_compression(const LiverModel& fine, const LiverModel& coarse, 
         const auto t0 = clock::now();
         const auto l = low.move_to(position, step + " (coarse)");
         const auto cu = low.displacement_mm();
+        const auto t1 = clock::now();
         const EnrichmentCondition query{"", start, d, depth * double(s) / double(steps)};
         run.coarse_to_fine_u = match_and_synthesize(db, how, k, query, coarse, cu, fine_nodes, fine, run.last_match);
         run.coarse_to_fine_landmarks = move_landmarks(fine, run.coarse_to_fine_u, rest_landmarks);
-        run.coarse_to_fine_ms.push_back(1e3 * std::chrono::duration<double>(clock::now() - t0).count());
+        const auto t2 = clock::now();
+        run.coarse_to_fine_ms.push_back(1e3 * std::chrono::duration<double>(t2 - t0).count());
+        run.coarse_solve_ms.push_back(1e3 * std::chrono::duration<double>(t1 - t0).count());
+        run.synthesis_ms.push_back(1e3 * std::chrono::duration<double>(t2 - t1).count());
         run.coarse_iterations.push_back(l.iterations);
         if (on_step) on_step(s);
     }

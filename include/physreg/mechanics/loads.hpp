@@ -40,6 +40,9 @@ struct Indenter {
     bool push_out(const Vec3& x, double load_factor, Vec3& surface_point, Vec3& normal) const;
     /// The closest point of the tool's surface to `x` (inside or outside) and the outward normal.
     void closest_surface_point(const Vec3& x, double load_factor, Vec3& surface_point, Vec3& normal) const;
+    /// Largest distance from the reference point to a point of the tool, mm (infinite for the
+    /// unbounded cylinder and plane): nodes farther than this from the reference point cannot touch it.
+    double reach_mm() const;
     void validate() const;
 };
 

@@ -102,6 +102,7 @@ private:
     bool push_node_out(const Indenter& indenter, Real* u, std::int32_t node, double load_factor, Vec3& normal) const;
     void constrain(Real* u, double load_factor, bool record_contacts);
     void constrain_with_active_set(Real* u, double load_factor, const Real* forces, Real s);
+    void select_contact_candidates(const Real* u, double from_factor, double to_factor);
     void check_state(const Real* u, const char* phase) const;
     std::vector<double> block_sums(const std::function<void(std::size_t, std::size_t, double*)>& partial, int values) const;
 
@@ -124,6 +125,10 @@ private:
     std::vector<Vec3> m_contact_normal;
     std::size_t m_contact_count = 0;
     std::vector<int> m_active_tool; ///< dynamic relaxation: the tool a node is held against, -1 none
+    /// Dynamic relaxation: per tool, the surface nodes that may touch it before the nodes have moved
+    /// m_candidate_slack mm more (checking only them is the same as checking every surface node).
+    std::vector<std::vector<std::int32_t>> m_contact_candidates;
+    double m_candidate_slack = -1.0;
     double m_time = 0.0;
     double m_load_factor = 0.0; ///< load level of the last equilibrium (warm start)
     long m_steps = 0;

@@ -154,6 +154,8 @@ CoarseToFinePrediction predict_coarse_to_fine(const LiverModel& fine, const Live
 /// and the landmarks at the final depth.
 struct TrackingRun {
     std::vector<double> high_resolution_ms, coarse_to_fine_ms;
+    /// coarse_to_fine_ms split: coarse equilibrium, and matching + synthesis + landmarks.
+    std::vector<double> coarse_solve_ms, synthesis_ms;
     std::vector<long> high_resolution_iterations, coarse_iterations;
     LandmarkSet high_resolution_landmarks, coarse_to_fine_landmarks; ///< at the final depth
     std::vector<double> high_resolution_u, coarse_to_fine_u;         ///< fine displacements at the final depth, mm

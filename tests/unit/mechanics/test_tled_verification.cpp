@@ -201,6 +201,43 @@ TEST(MechanicsTled, IndentationConvergesUnderMeshRefinement)
     EXPECT_LT(hourglass_fraction[2], 0.05);
 }
 
+TEST(MechanicsTled, ContactSearchFollowsTheToolAndTheTissue)
+{
+    // Dynamic relaxation checks contact only for surface nodes near the tool's sweep (reach +
+    // margin, re-selected as nodes move). A 3 mm sphere (margin 1 mm) pressed 4 mm into a soft block
+    // and dragged 6 mm sideways in one solve sweeps far beyond its first candidates: at equilibrium
+    // no surface node may be inside it, and the tool must hold nodes.
+    const VolumeMesh mesh = block_mesh(12, 12, 6, 2.0);
+    const TledModel model(mesh, one_tissue(3e3, 0.45), {});
+    Indenter plane;
+    plane.shape = IndenterShape::plane;
+    EXPECT_FALSE(std::isfinite(plane.reach_mm()));
+    Loads loads;
+    loads.constraints.push_back({"base", nodes_at(mesh, 2, 0.0), {true, true, true}, Vec3::Zero()});
+    Indenter sphere;
+    sphere.name = "sphere";
+    sphere.radius_mm = 3;
+    sphere.path = {Vec3(9, 12, 15), Vec3(9, 12, 11), Vec3(15, 12, 11)}; // down 4 mm below the top, then along x
+    loads.indenters.push_back(sphere);
+    TledSolver<double> solver(model);
+    solver.set_loads(loads);
+    EquilibriumOptions o;
+    o.displacement_tolerance_mm = 1e-5;
+    o.residual_tolerance = 1e-4;
+    o.ramp_iterations = 2000;
+    const SolveSummary s = solver.solve_equilibrium(o, 1.0);
+    ASSERT_TRUE(s.converged()) << s.message;
+    EXPECT_DOUBLE_EQ(sphere.reach_mm(), 3.0);
+    EXPECT_GT(solver.contact_nodes(), 4u);
+    const auto u = solver.displacement_mm();
+    double deepest = 0.0;
+    for (const auto n : model.surface_nodes()) { // node-to-surface contact: interior nodes are not checked
+        const Vec3 x = mesh.nodes[n] + Vec3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
+        deepest = std::max(deepest, sphere.radius_mm - (x - sphere.path.back()).norm());
+    }
+    EXPECT_LT(deepest, 1e-9) << "a surface node is " << deepest << " mm inside the tool";
+}
+
 TEST(MechanicsTled, BadInputIsRefused)
 {
     const VolumeMesh mesh = block_mesh(2, 2, 2, 1.0);
