@@ -3,7 +3,7 @@
 // Elements of a batch sit in SIMD lanes: node values are gathered into lane-major stack arrays,
 // all arithmetic runs over the lanes (the compiler vectorises the `omp simd` loops), and forces
 // are scattered back node by node. Elements of one colour share no node, so the scatter is race
-// free. A CUDA version maps one lane to one thread.
+// free. (A GPU port would map one lane to one thread; there is none yet.)
 #include "physreg/mechanics/material.hpp"
 
 #include <cmath>
