@@ -298,7 +298,7 @@ void TledSolver<Real>::constrain_with_active_set(Real* u, double load_factor, co
         for (auto node : m_contact_candidates[t]) {
             Real* un = u + 3 * static_cast<std::size_t>(node);
             const Real* xn = m_rest.data() + 3 * static_cast<std::size_t>(node);
-            const Vec3 x(double(xn[0] + un[0]), double(xn[1] + un[1]), double(xn[2] + un[2]));
+            const Vec3 x = current_position(u, node);
             Vec3 surface, normal;
             if (m_active_tool[node] == static_cast<int>(t)) {
                 tool.closest_surface_point(x, load_factor, surface, normal);
@@ -353,9 +353,7 @@ void TledSolver<Real>::select_contact_candidates(const Real* u, double from_fact
         polyline.push_back(tool.position(hi));
         const double limit = reach + tool_margin;
         for (auto node : surface) {
-            const Real* un = u + 3 * static_cast<std::size_t>(node);
-            const Real* xn = m_rest.data() + 3 * static_cast<std::size_t>(node);
-            const Vec3 x(double(xn[0] + un[0]), double(xn[1] + un[1]), double(xn[2] + un[2]));
+            const Vec3 x = current_position(u, node);
             double distance = std::numeric_limits<double>::infinity();
             for (std::size_t i = 0; i + 1 < polyline.size(); ++i) {
                 const Vec3 a = polyline[i], ab = polyline[i + 1] - a;
@@ -374,12 +372,19 @@ bool TledSolver<Real>::push_node_out(const Indenter& indenter, Real* u, std::int
 {
     Real* un = u + 3 * static_cast<std::size_t>(node);
     const Real* xn = m_rest.data() + 3 * static_cast<std::size_t>(node);
-    const Vec3 x(double(xn[0] + un[0]), double(xn[1] + un[1]), double(xn[2] + un[2]));
+    const Vec3 x = current_position(u, node);
     Vec3 surface;
     if (!indenter.push_out(x, load_factor, surface, normal)) return false;
     for (int d = 0; d < 3; ++d)
         if (!m_constrained[3 * node + d]) un[d] = static_cast<Real>(surface[d] - double(xn[d]));
     return true;
+}
+
+template <typename Real>
+Vec3 TledSolver<Real>::current_position(const Real* u, std::int32_t node) const
+{
+    const std::size_t k = 3 * static_cast<std::size_t>(node);
+    return {double(m_rest[k] + u[k]), double(m_rest[k + 1] + u[k + 1]), double(m_rest[k + 2] + u[k + 2])};
 }
 
 template <typename Real>

@@ -103,6 +103,7 @@ private:
     void constrain(Real* u, double load_factor, bool record_contacts);
     void constrain_with_active_set(Real* u, double load_factor, const Real* forces, Real s);
     void select_contact_candidates(const Real* u, double from_factor, double to_factor);
+    Vec3 current_position(const Real* u, std::int32_t node) const; ///< rest + u, mm
     void check_state(const Real* u, const char* phase) const;
     std::vector<double> block_sums(const std::function<void(std::size_t, std::size_t, double*)>& partial, int values) const;
 
