@@ -118,6 +118,7 @@ int main(int argc, char** argv)
         if (argc < 4) fail("usage: bench_dr_spectrum DATASET PARAMETERS.json OUTPUT.json [--states D,E] [--steps-coarse N] [--steps-fine N]");
         std::string states = "D,E";
         int steps_coarse = 800, steps_fine = 800;
+        if ((argc - 4) % 2 != 0) fail("option '{}' needs a value", argv[argc - 1]);
         for (int a = 4; a + 1 < argc; a += 2) {
             const std::string key = argv[a];
             if (key == "--states") states = argv[a + 1];
