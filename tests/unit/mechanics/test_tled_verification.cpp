@@ -18,6 +18,19 @@ EquilibriumOptions tight()
     return o;
 }
 
+// A block held at its base (z = 0) and pressed by a sphere of `radius_mm` moving along `path`.
+Loads base_held_sphere_press(const VolumeMesh& mesh, double radius_mm, std::vector<Vec3> path)
+{
+    Loads loads;
+    loads.constraints.push_back({"base", nodes_at(mesh, 2, 0.0), {true, true, true}, Vec3::Zero()});
+    Indenter sphere;
+    sphere.name = "sphere";
+    sphere.radius_mm = radius_mm;
+    sphere.path = std::move(path);
+    loads.indenters.push_back(sphere);
+    return loads;
+}
+
 } // namespace
 
 TEST(MechanicsTled, PatchTestReproducesConstantStrainOnDistortedMeshes)
@@ -167,13 +180,8 @@ TEST(MechanicsTled, IndentationConvergesUnderMeshRefinement)
         const int n = static_cast<int>(24 / h), nz = static_cast<int>(12 / h);
         const VolumeMesh mesh = block_mesh(n, n, nz, h);
         const TledModel model(mesh, one_tissue(3e3, 0.45), {});
-        Loads loads;
-        loads.constraints.push_back({"base", nodes_at(mesh, 2, 0.0), {true, true, true}, Vec3::Zero()});
-        Indenter sphere;
-        sphere.name = "sphere";
-        sphere.radius_mm = 6;
-        sphere.path = {Vec3(12, 12, 18), Vec3(12, 12, 16)}; // bottom of the sphere from z = 12 to 10
-        loads.indenters.push_back(sphere);
+        // Bottom of the sphere from z = 12 to 10.
+        const Loads loads = base_held_sphere_press(mesh, 6.0, {Vec3(12, 12, 18), Vec3(12, 12, 16)});
         TledSolver<double> solver(model);
         solver.set_loads(loads);
         EquilibriumOptions o;
@@ -212,13 +220,9 @@ TEST(MechanicsTled, ContactSearchFollowsTheToolAndTheTissue)
     Indenter plane;
     plane.shape = IndenterShape::plane;
     EXPECT_FALSE(std::isfinite(plane.reach_mm()));
-    Loads loads;
-    loads.constraints.push_back({"base", nodes_at(mesh, 2, 0.0), {true, true, true}, Vec3::Zero()});
-    Indenter sphere;
-    sphere.name = "sphere";
-    sphere.radius_mm = 3;
-    sphere.path = {Vec3(9, 12, 15), Vec3(9, 12, 11), Vec3(15, 12, 11)}; // down 4 mm below the top, then along x
-    loads.indenters.push_back(sphere);
+    // Down 4 mm below the top, then along x.
+    const Loads loads = base_held_sphere_press(mesh, 3.0, {Vec3(9, 12, 15), Vec3(9, 12, 11), Vec3(15, 12, 11)});
+    const Indenter& sphere = loads.indenters.front();
     TledSolver<double> solver(model);
     solver.set_loads(loads);
     EquilibriumOptions o;
