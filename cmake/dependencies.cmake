@@ -16,3 +16,10 @@ find_package(ITK 5.2 REQUIRED COMPONENTS
 find_package(pugixml REQUIRED)
 find_package(MPI REQUIRED COMPONENTS CXX) # OpenMPI: enrichment database builds across processes and machines
 find_package(NLopt 2.7 REQUIRED) # derivative-free optimisation (BOBYQA, Nelder–Mead): parameter estimation
+# CHOLMOD (SuiteSparse 5, Debian): supernodal Cholesky of the implicit solvers' tangents. Debian's
+# SuiteSparse 5 ships no CMake package, so the header and library are located directly.
+find_path(CHOLMOD_INCLUDE_DIR cholmod.h PATH_SUFFIXES suitesparse REQUIRED)
+find_library(CHOLMOD_LIBRARY cholmod REQUIRED)
+add_library(physreg_cholmod INTERFACE)
+target_include_directories(physreg_cholmod SYSTEM INTERFACE ${CHOLMOD_INCLUDE_DIR})
+target_link_libraries(physreg_cholmod INTERFACE ${CHOLMOD_LIBRARY})

@@ -6,6 +6,8 @@ packages=(
   cmake make g++ pkg-config
   libinsighttoolkit5-dev   # ITK 5.2: medical image IO (NIfTI, NRRD, MetaImage, DICOM)
   libeigen3-dev            # Eigen 3.4: linear algebra
+  libsuitesparse-dev       # CHOLMOD supernodal Cholesky: implicit (Newton) solves
+  libopenblas0-openmp      # optimised BLAS/LAPACK behind CHOLMOD (replaces the reference BLAS via alternatives)
   libcli11-dev             # command line
   nlohmann-json3-dev       # JSON summaries, Slicer markups
   libyaml-cpp-dev          # tissue tables

@@ -105,3 +105,13 @@ inline Real first_piola_kirchhoff(MaterialLaw law, Real mu, Real lambda, Real ka
 }
 
 } // namespace physreg
+
+namespace physreg {
+
+/// Material tangent A = ∂P/∂F (MPa) at F (row-major 3×3), for implicit solvers (double precision):
+/// a[9 (3i + J) + (3k + L)] = ∂P_iJ/∂F_kL. With P = F S and ℂ = 2 ∂S/∂C,
+/// A_iJkL = δ_ik S_JL + Σ_IK F_iI ℂ_IJKL F_kK (Neo-Hookean and St Venant–Kirchhoff); the linear
+/// law's A is constant. Returns J = det F. The averaged-nodal-pressure variant has no tangent here.
+double first_piola_tangent(MaterialLaw law, const ElasticMaterial& m, const double* f, double* a);
+
+} // namespace physreg

@@ -67,11 +67,18 @@ public:
     /// Per node: Σ over rows of |∂²E/∂u_j∂u_l| (Gershgorin bound of the coupling stiffness), N/mm.
     std::vector<double> stiffness_bound() const;
 
-private:
     struct Entry {
         std::int32_t node;
         double phi; ///< +Φ on the first side, −Φ on the second: δ = Σ entry.phi u_node
     };
+    /// Point i's gap as δ_i = Σ entry.phi u_node: its energy's Hessian is k_i φ φᵀ ⊗ I₃ (implicit solvers).
+    std::span<const Entry> point_entries(std::size_t i) const
+    {
+        return {m_entries.data() + m_begin[i], static_cast<std::size_t>(m_begin[i + 1] - m_begin[i])};
+    }
+    double point_stiffness_n_per_mm(std::size_t i) const { return m_k[i]; }
+
+private:
     std::vector<InterfacePoint> m_points;
     std::vector<std::int64_t> m_begin; ///< entries of point i: [m_begin[i], m_begin[i+1])
     std::vector<Entry> m_entries;

@@ -84,4 +84,17 @@ inline double force_x(const std::vector<double>& forces, const std::vector<std::
     return sum;
 }
 
+// A block held at its base (z = 0) and pressed by a sphere of `radius_mm` moving along `path`.
+inline Loads base_held_sphere_press(const VolumeMesh& mesh, double radius_mm, std::vector<Vec3> path)
+{
+    Loads loads;
+    loads.constraints.push_back({"base", nodes_at(mesh, 2, 0.0), {true, true, true}, Vec3::Zero()});
+    Indenter sphere;
+    sphere.name = "sphere";
+    sphere.radius_mm = radius_mm;
+    sphere.path = std::move(path);
+    loads.indenters.push_back(sphere);
+    return loads;
+}
+
 } // namespace physreg::test

@@ -1,0 +1,62 @@
+#pragma once
+// Linear solvers for the symmetric positive definite systems of implicit mechanics (K Δu = −r).
+//
+// - cholmod: supernodal Cholesky (SuiteSparse CHOLMOD, through Eigen). The symbolic analysis (fill-
+//   reducing ordering, supernodes) is done once per sparsity pattern and reused for every Newton
+//   step and tool position; each solve refactors numerically.
+// - pcg-factor: conjugate gradients preconditioned by the Cholesky factor of an *earlier* tangent.
+//   Along a tool trajectory the tangent changes slowly, so a stale factor keeps PCG to a few
+//   iterations; the factor is renewed when PCG needs more than `refactor_iterations`.
+// A tangent that is not positive definite (buckling, an unconstrained mode) is factored again with
+// a diagonal shift σ I, growing 10× per try from 1e-6 × the largest diagonal entry; the shift is reported (a shifted tangent still gives a
+// descent direction for the energy line search; convergence is always judged on the true residual).
+#include "physreg/mechanics/stiffness_assembly.hpp"
+
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+
+namespace physreg {
+
+enum class LinearSolverKind { automatic, cholmod, pcg_factor };
+LinearSolverKind parse_linear_solver(const std::string& text); ///< auto | cholmod | pcg-factor
+std::string to_string(LinearSolverKind kind);
+
+struct LinearSolveStats {
+    int iterations = 0;      ///< PCG iterations (0 for a direct solve)
+    bool factorised = false; ///< a numeric factorisation was made
+    double shift = 0.0;      ///< diagonal shift needed to factor (0: positive definite)
+    double factorisation_s = 0.0, solve_s = 0.0;
+};
+
+struct LinearSolverOptions {
+    LinearSolverKind kind = LinearSolverKind::automatic;
+    double pcg_relative_tolerance = 1e-10; ///< ‖r‖ ≤ tol ‖b‖
+    int refactor_iterations = 25;          ///< pcg-factor: renew the factor beyond this many iterations
+    void validate() const;
+};
+
+class SymmetricSolver {
+public:
+    explicit SymmetricSolver(const LinearSolverOptions& options);
+    ~SymmetricSolver();
+    SymmetricSolver(SymmetricSolver&&) noexcept;
+    SymmetricSolver& operator=(SymmetricSolver&&) noexcept;
+
+    /// Solves K x = b. K (both triangles stored) keeps its sparsity pattern between calls. Throws
+    /// Error when K cannot be factored even with a shift of 1e3 × its largest diagonal entry.
+    LinearSolveStats solve(const SparseMatrix& k, const Eigen::VectorXd& b, Eigen::VectorXd& x);
+    /// Forget the factor (the next pcg-factor solve refactors).
+    void invalidate();
+    const LinearSolverOptions& options() const { return m_options; }
+
+private:
+    struct Impl;
+    LinearSolverOptions m_options;
+    std::unique_ptr<Impl> m_impl;
+};
+
+/// y = K x for a symmetric K stored in both triangles (column j is row j), on OpenMP threads.
+void symmetric_product(const SparseMatrix& k, const Eigen::VectorXd& x, Eigen::VectorXd& y);
+
+} // namespace physreg

@@ -1,0 +1,166 @@
+#include "physreg/mechanics/linear_solver.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+
+#include <Eigen/CholmodSupport>
+#include <chrono>
+#include <cmath>
+
+namespace physreg {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start)
+{
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+} // namespace
+
+LinearSolverKind parse_linear_solver(const std::string& text)
+{
+    if (text == "auto") return LinearSolverKind::automatic;
+    if (text == "cholmod") return LinearSolverKind::cholmod;
+    if (text == "pcg-factor") return LinearSolverKind::pcg_factor;
+    fail("linear solver '{}' is not one of auto, cholmod, pcg-factor", text);
+}
+
+std::string to_string(LinearSolverKind kind)
+{
+    switch (kind) {
+    case LinearSolverKind::automatic: return "auto";
+    case LinearSolverKind::cholmod: return "cholmod";
+    default: return "pcg-factor";
+    }
+}
+
+void LinearSolverOptions::validate() const
+{
+    if (!(pcg_relative_tolerance > 0 && pcg_relative_tolerance < 1))
+        fail("linear solver: pcg tolerance {} must be in (0, 1)", pcg_relative_tolerance);
+    if (refactor_iterations < 1) fail("linear solver: refactor_iterations {} must be ≥ 1", refactor_iterations);
+}
+
+void symmetric_product(const SparseMatrix& k, const Eigen::VectorXd& x, Eigen::VectorXd& y)
+{
+    const Eigen::Index n = k.cols();
+    y.resize(n);
+    const int* outer = k.outerIndexPtr();
+    const int* inner = k.innerIndexPtr();
+    const double* values = k.valuePtr();
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index c = 0; c < n; ++c) {
+        double sum = 0.0;
+        for (int p = outer[c]; p < outer[c + 1]; ++p) sum += values[p] * x[inner[p]];
+        y[c] = sum;
+    }
+}
+
+struct SymmetricSolver::Impl {
+    Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> factor;
+    bool analysed = false, factored = false;
+    Eigen::Index pattern_nnz = -1, pattern_rows = -1;
+
+    Impl()
+    {
+        factor.cholmod().print = 0; // failures are reported by us, not on stderr
+    }
+
+    // Numeric factorisation, shifted when K is not positive definite. Returns the shift used.
+    double factorise(const SparseMatrix& k)
+    {
+        if (!analysed || k.nonZeros() != pattern_nnz || k.rows() != pattern_rows) {
+            factor.analyzePattern(k);
+            analysed = true;
+            pattern_nnz = k.nonZeros();
+            pattern_rows = k.rows();
+        }
+        factor.setShift(0.0);
+        factor.factorize(k);
+        if (factor.info() == Eigen::Success) {
+            factored = true;
+            return 0.0;
+        }
+        double largest = 0.0;
+        for (Eigen::Index j = 0; j < k.cols(); ++j) largest = std::max(largest, std::abs(k.coeff(j, j)));
+        // Away from equilibrium a compressed near-incompressible material can have a strongly
+        // indefinite tangent (large compressive pressure in the geometric stiffness): the shift
+        // grows until the factor exists, which turns the step towards steepest descent.
+        for (double shift = 1e-6 * largest; shift <= 1.001e3 * largest; shift *= 10.0) {
+            factor.setShift(shift);
+            factor.factorize(k);
+            if (factor.info() == Eigen::Success) {
+                factored = true;
+                logger()->debug("linear solver: tangent not positive definite, factored with shift {:.3g}", shift);
+                return shift;
+            }
+        }
+        factored = false;
+        fail("linear solver: the tangent stiffness is not positive definite even with a diagonal shift of 1e3 × its "
+             "largest entry ({:.3g}): it has NaN entries, or the model is not constrained",
+             largest);
+    }
+};
+
+SymmetricSolver::SymmetricSolver(const LinearSolverOptions& options) : m_options(options), m_impl(std::make_unique<Impl>())
+{
+    options.validate();
+    if (m_options.kind == LinearSolverKind::automatic) m_options.kind = LinearSolverKind::pcg_factor;
+}
+SymmetricSolver::~SymmetricSolver() = default;
+SymmetricSolver::SymmetricSolver(SymmetricSolver&&) noexcept = default;
+SymmetricSolver& SymmetricSolver::operator=(SymmetricSolver&&) noexcept = default;
+
+void SymmetricSolver::invalidate()
+{
+    m_impl->factored = false;
+}
+
+LinearSolveStats SymmetricSolver::solve(const SparseMatrix& k, const Eigen::VectorXd& b, Eigen::VectorXd& x)
+{
+    LinearSolveStats stats;
+    Impl& s = *m_impl;
+    const auto direct = [&] {
+        auto start = std::chrono::steady_clock::now();
+        stats.shift = s.factorise(k);
+        stats.factorised = true;
+        stats.factorisation_s += seconds_since(start);
+        start = std::chrono::steady_clock::now();
+        x = s.factor.solve(b);
+        stats.solve_s += seconds_since(start);
+    };
+    if (m_options.kind == LinearSolverKind::cholmod || !s.factored || k.rows() != s.pattern_rows) {
+        direct();
+        return stats;
+    }
+    // PCG with the stale factor as preconditioner.
+    const auto start = std::chrono::steady_clock::now();
+    const double b_norm = b.norm();
+    x.setZero(b.size());
+    if (b_norm == 0.0) return stats;
+    Eigen::VectorXd r = b, z = s.factor.solve(r), p = z, q;
+    double rz = r.dot(z);
+    bool converged = false;
+    for (int it = 1; it <= m_options.refactor_iterations; ++it) {
+        symmetric_product(k, p, q);
+        const double pq = p.dot(q);
+        if (!(pq > 0.0)) break; // K not positive definite along p: refactor with a shift
+        const double alpha = rz / pq;
+        x += alpha * p;
+        r -= alpha * q;
+        stats.iterations = it;
+        if (r.norm() <= m_options.pcg_relative_tolerance * b_norm) {
+            converged = true;
+            break;
+        }
+        z = s.factor.solve(r);
+        const double rz_new = r.dot(z);
+        p = z + (rz_new / rz) * p;
+        rz = rz_new;
+    }
+    stats.solve_s += seconds_since(start);
+    if (!converged) direct(); // the factor has gone stale: renew it
+    return stats;
+}
+
+} // namespace physreg

@@ -1,0 +1,349 @@
+// Implicit mechanics: material tangents, the assembled stiffness, contact terms and the Newton
+// solver, checked against finite differences, analytical solutions and dynamic relaxation.
+#include "mechanics_fixtures.hpp"
+#include "physreg/core/error.hpp"
+#include "physreg/mechanics/newton_solver.hpp"
+#include "physreg/mechanics/stiffness_assembly.hpp"
+#include "physreg/mechanics/tissue_coupling.hpp"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <iostream>
+#include <random>
+
+namespace physreg {
+using namespace test;
+
+namespace {
+
+// A deformation gradient with no symmetry and J ≈ 1.05.
+const double kF[9] = {1.1, 0.2, -0.05, 0.03, 0.93, 0.12, -0.07, 0.04, 1.05};
+
+std::vector<double> random_vector(std::size_t n, double scale, std::uint32_t seed)
+{
+    std::mt19937 random(seed);
+    std::uniform_real_distribution<double> d(-scale, scale);
+    std::vector<double> v(n);
+    for (auto& x : v) x = d(random);
+    return v;
+}
+
+double max_abs(const std::vector<double>& v)
+{
+    double m = 0;
+    for (double x : v) m = std::max(m, std::abs(x));
+    return m;
+}
+
+// ‖K v − (f(u + h v) − f(u − h v)) / 2h‖∞ / ‖K v‖∞ for a few random directions v.
+double tangent_error(const StiffnessAssembler& assembler, const std::vector<double>& u)
+{
+    const std::size_t n = u.size();
+    SparseMatrix k = assembler.make_matrix();
+    std::vector<double> f(n);
+    EXPECT_LT(assembler.assemble(u.data(), f.data(), &k).inverted_element, 0);
+    double worst = 0.0;
+    for (std::uint32_t seed = 1; seed <= 3; ++seed) {
+        const auto v = random_vector(n, 1.0, 100 + seed);
+        const double h = 1e-6;
+        std::vector<double> up(n), um(n), fp(n), fm(n);
+        for (std::size_t i = 0; i < n; ++i) up[i] = u[i] + h * v[i], um[i] = u[i] - h * v[i];
+        assembler.assemble(up.data(), fp.data(), nullptr);
+        assembler.assemble(um.data(), fm.data(), nullptr);
+        const Eigen::VectorXd kv = k * Eigen::Map<const Eigen::VectorXd>(v.data(), n);
+        double diff = 0.0;
+        for (std::size_t i = 0; i < n; ++i) diff = std::max(diff, std::abs(kv[i] - (fp[i] - fm[i]) / (2 * h)));
+        worst = std::max(worst, diff / kv.cwiseAbs().maxCoeff());
+    }
+    return worst;
+}
+
+// Energy gradient = internal force: (W(u + h v) − W(u − h v)) / 2h against f·v.
+double gradient_error(const StiffnessAssembler& assembler, const std::vector<double>& u)
+{
+    const std::size_t n = u.size();
+    std::vector<double> f(n), scratch(n);
+    assembler.assemble(u.data(), f.data(), nullptr);
+    const auto v = random_vector(n, 1.0, 7);
+    const double h = 1e-6;
+    std::vector<double> up(n), um(n);
+    for (std::size_t i = 0; i < n; ++i) up[i] = u[i] + h * v[i], um[i] = u[i] - h * v[i];
+    const double fd = (assembler.energy(up.data()).energy_mj - assembler.energy(um.data()).energy_mj) / (2 * h);
+    double fv = 0;
+    for (std::size_t i = 0; i < n; ++i) fv += f[i] * v[i];
+    return std::abs(fd - fv) / std::abs(fv);
+}
+
+VolumeMesh distorted(VolumeMesh mesh, double amplitude_mm)
+{
+    mesh.grid.reset();
+    mesh.cell_grid_index.clear();
+    const auto shift = random_vector(3 * mesh.node_count(), amplitude_mm, 3);
+    for (std::size_t i = 0; i < mesh.node_count(); ++i)
+        for (int d = 0; d < 3; ++d) mesh.nodes[i][d] += shift[3 * i + d];
+    return mesh;
+}
+
+NewtonOptions tight_newton()
+{
+    NewtonOptions o;
+    o.residual_tolerance = 1e-9;
+    o.penetration_tolerance_mm = 1e-6;
+    return o;
+}
+
+} // namespace
+
+TEST(MechanicsImplicit, MaterialTangentMatchesFiniteDifferencesOfTheStress)
+{
+    const ElasticMaterial m = material_from_tissue({1, "t", 2e5, 0.49, 1000});
+    for (MaterialLaw law : {MaterialLaw::neo_hookean, MaterialLaw::st_venant_kirchhoff, MaterialLaw::linear_elastic}) {
+        double a[81];
+        first_piola_tangent(law, m, kF, a);
+        double worst = 0.0, largest = 0.0;
+        for (int kl = 0; kl < 9; ++kl) {
+            double fp[9], fm[9], pp[9], pm[9];
+            std::copy(kF, kF + 9, fp);
+            std::copy(kF, kF + 9, fm);
+            const double h = 1e-6;
+            fp[kl] += h;
+            fm[kl] -= h;
+            first_piola_kirchhoff<double>(law, m.mu_mpa, m.lambda_mpa, m.kappa_mpa, fp, pp);
+            first_piola_kirchhoff<double>(law, m.mu_mpa, m.lambda_mpa, m.kappa_mpa, fm, pm);
+            for (int ij = 0; ij < 9; ++ij) {
+                worst = std::max(worst, std::abs(a[9 * ij + kl] - (pp[ij] - pm[ij]) / (2 * h)));
+                largest = std::max(largest, std::abs(a[9 * ij + kl]));
+            }
+        }
+        EXPECT_LT(worst, 1e-7 * largest) << to_string(law) << ": " << worst << " of " << largest;
+    }
+}
+
+TEST(MechanicsImplicit, AssembledTangentMatchesFiniteDifferencesOfTheForces)
+{
+    const VolumeMesh grid = block_mesh(4, 3, 3, 1.5);
+    struct Case {
+        const char* name;
+        VolumeMesh mesh;
+        MaterialLaw law;
+    };
+    const std::vector<Case> cases = {{"grid hexahedra, neo-Hookean", grid, MaterialLaw::neo_hookean},
+                                     {"distorted hexahedra, neo-Hookean", distorted(grid, 0.2), MaterialLaw::neo_hookean},
+                                     {"distorted hexahedra, SVK", distorted(grid, 0.2), MaterialLaw::st_venant_kirchhoff},
+                                     {"tetrahedra, neo-Hookean", split_hexahedra_into_tetrahedra(distorted(grid, 0.2)), MaterialLaw::neo_hookean},
+                                     {"tetrahedra, linear", split_hexahedra_into_tetrahedra(grid), MaterialLaw::linear_elastic}};
+    for (const auto& c : cases) {
+        TledOptions options;
+        options.law = c.law;
+        const TledModel model(c.mesh, one_tissue(2e5, 0.49), options);
+        const StiffnessAssembler assembler(model);
+        const auto u = random_vector(3 * model.node_count(), 0.08, 11); // strains of ≈ 10 %, no symmetry
+        EXPECT_LT(tangent_error(assembler, u), 1e-6) << c.name;
+        EXPECT_LT(gradient_error(assembler, u), 1e-6) << c.name;
+        SparseMatrix k = assembler.make_matrix();
+        std::vector<double> f(u.size());
+        assembler.assemble(u.data(), f.data(), &k);
+        const SparseMatrix kt = k.transpose();
+        EXPECT_LT((k - kt).norm(), 1e-10 * k.norm()) << c.name << ": the tangent is not symmetric";
+    }
+}
+
+TEST(MechanicsImplicit, CouplingTangentMatchesFiniteDifferences)
+{
+    // Parenchyma with a stiff cubic inclusion, split and coupled by MLS penalties (paper 000).
+    const auto volume = make_volume({6, 6, 6}, [](int i, int j, int k) -> std::uint16_t {
+        return (i >= 2 && i < 4 && j >= 2 && j < 4 && k >= 2 && k < 4) ? 2 : 1;
+    });
+    TissueTable tissues;
+    tissues.tissues = {{1, "parenchyma", 2e5, 0.49, 1000}, {2, "tumour", 5e6, 0.49, 1000}};
+    const VolumeMesh mesh = mesh_label_volume(volume, tissues, {}, "inclusion").mesh;
+    const SplitMesh split = split_tissue_interfaces(mesh, {{1, TissueGroup::parenchyma}, {2, TissueGroup::tumour}},
+                                                    CouplingStiffness{5e4, 5e4}, {});
+    ASSERT_FALSE(split.coupling.empty());
+    const TledModel model(split.mesh, tissues, {});
+    const StiffnessAssembler assembler(model, &split.coupling);
+    const auto u = random_vector(3 * model.node_count(), 0.05, 5);
+    EXPECT_LT(tangent_error(assembler, u), 1e-6);
+    EXPECT_LT(gradient_error(assembler, u), 1e-6);
+}
+
+TEST(MechanicsImplicit, ContactTermIsTheGradientAndHessianOfItsEnergy)
+{
+    Indenter sphere;
+    sphere.radius_mm = 2.0;
+    sphere.path = {Vec3(0, 0, 0)};
+    Indenter cylinder = sphere;
+    cylinder.shape = IndenterShape::cylinder;
+    cylinder.axis = Vec3(1, 1, 0).normalized();
+    Indenter plane = sphere;
+    plane.shape = IndenterShape::plane;
+    plane.axis = Vec3(0, 0.6, 0.8);
+    const Vec3 x(0.4, 0.7, -1.5); // inside all three tools
+    for (const Indenter* tool : {&sphere, &cylinder, &plane}) {
+        const double lambda = 0.3, eps = 50.0;
+        const ContactTerm t = contact_term(*tool, x, 1.0, lambda, eps);
+        ASSERT_GT(t.pressure_n, 0.0);
+        EXPECT_LT(t.gap_mm, 0.0);
+        const double h = 1e-6;
+        for (int d = 0; d < 3; ++d) {
+            const Vec3 e = Vec3::Unit(d) * h;
+            const ContactTerm p = contact_term(*tool, x + e, 1.0, lambda, eps), m = contact_term(*tool, x - e, 1.0, lambda, eps);
+            EXPECT_NEAR((p.energy_mj - m.energy_mj) / (2 * h), t.gradient[d], 1e-6 * t.gradient.norm());
+            const Vec3 column = (p.gradient - m.gradient) / (2 * h);
+            EXPECT_LT((column - t.hessian.col(d)).norm(), 1e-6 * t.hessian.norm());
+        }
+    }
+    // Outside the tool with no multiplier: nothing.
+    const ContactTerm away = contact_term(sphere, Vec3(0, 0, 5), 1.0, 0.0, 50.0);
+    EXPECT_EQ(away.pressure_n, 0.0);
+    EXPECT_EQ(away.energy_mj, 0.0);
+}
+
+TEST(MechanicsImplicit, NewtonReproducesTheAnalyticalUniaxialStretch)
+{
+    // 20 % stretch of a 4 × 2 × 2 mm bar, ν = 0.49: hexahedra and tetrahedra within 0.5 % of the
+    // analytical Neo-Hookean stress, in one Newton solve (homogeneous states are exact for both).
+    const double length = 4, width = 2, height = 2, stretch = 1.2;
+    for (bool tets : {false, true}) {
+        VolumeMesh mesh = block_mesh(4, 2, 2, 1.0);
+        if (tets) mesh = split_hexahedra_into_tetrahedra(mesh);
+        const TledModel model(mesh, one_tissue(2e5, 0.49), {});
+        NewtonSolver solver(model, tight_newton());
+        solver.set_loads(uniaxial_loads(mesh, length, width, height, stretch));
+        const NewtonSummary s = solver.solve_equilibrium(1.0);
+        ASSERT_TRUE(s.converged) << s.message;
+        EXPECT_LT(s.newton_iterations, 30);
+        const auto [lateral, p11] = neo_hookean_uniaxial(stretch, model.materials()[0]);
+        const double force = force_x(solver.internal_forces_n(), nodes_at(mesh, 0, length));
+        EXPECT_NEAR(force / (width * height), p11, 0.005 * p11) << (tets ? "tetrahedra" : "hexahedra");
+        const auto u = solver.displacement_mm();
+        const auto corner = node_at(mesh, Vec3(length, width, height));
+        EXPECT_NEAR(u[3 * corner + 1], (lateral - 1) * width, 1e-3 * width);
+    }
+}
+
+TEST(MechanicsImplicit, NewtonAndDynamicRelaxationAgreeUnderASphere)
+{
+    // A 24 × 24 × 12 mm block (1 mm hexahedra, ν = 0.45) on a fixed base, a 2 mm sphere pressed
+    // 1.5 mm into the top, in three tool positions (warm start as along a trajectory).
+    const VolumeMesh mesh = block_mesh(24, 24, 12, 1.0);
+    const TledModel model(mesh, one_tissue(3e3, 0.45), {});
+    const Loads loads = base_held_sphere_press(mesh, 2.0, {Vec3(12, 12, 14), Vec3(12, 12, 12.5)});
+    NewtonSolver newton(model, tight_newton());
+    newton.set_loads(loads);
+    TledSolver<double> relaxation(model);
+    relaxation.set_loads(loads);
+    EquilibriumOptions dr;
+    dr.displacement_tolerance_mm = 1e-6;
+    dr.residual_tolerance = 1e-7;
+    dr.max_iterations = 400000;
+    for (double s : {0.5, 1.0}) {
+        const NewtonSummary ns = newton.solve_equilibrium(s);
+        ASSERT_TRUE(ns.converged) << ns.message;
+        EXPECT_LE(ns.max_penetration_mm, 1e-6);
+    }
+    const auto start = std::chrono::steady_clock::now();
+    const SolveSummary ds = relaxation.solve_equilibrium(dr, 1.0);
+    ASSERT_TRUE(ds.converged()) << ds.message;
+    std::cout << "dynamic relaxation: " << ds.iterations << " iterations, "
+              << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() << " s\n";
+    const auto un = newton.displacement_mm(), ud = relaxation.displacement_mm();
+    double peak = 0, diff = 0;
+    for (std::size_t i = 0; i < un.size(); ++i) {
+        peak = std::max(peak, std::abs(ud[i]));
+        diff = std::max(diff, std::abs(un[i] - ud[i]));
+    }
+    EXPECT_GT(peak, 1.4);
+    EXPECT_LT(diff, 1e-4 * peak) << "Newton and relaxation differ by " << diff << " mm of a peak " << peak << " mm";
+}
+
+TEST(MechanicsImplicit, StaleFactorPcgMatchesTheDirectSolverAlongAToolPath)
+{
+    const VolumeMesh mesh = block_mesh(12, 12, 6, 1.0);
+    const TledModel model(mesh, one_tissue(3e3, 0.45), {});
+    const Loads loads = base_held_sphere_press(mesh, 2.0, {Vec3(6, 6, 8), Vec3(6, 6, 7), Vec3(8, 6, 7)});
+    std::vector<std::vector<double>> results;
+    std::vector<NewtonSummary> summaries;
+    for (LinearSolverKind kind : {LinearSolverKind::cholmod, LinearSolverKind::pcg_factor}) {
+        NewtonOptions o = tight_newton();
+        o.linear.kind = kind;
+        NewtonSolver solver(model, o);
+        solver.set_loads(loads);
+        NewtonSummary total;
+        for (double s : {0.25, 0.5, 0.75, 1.0}) {
+            const NewtonSummary ns = solver.solve_equilibrium(s);
+            ASSERT_TRUE(ns.converged) << to_string(kind) << ": " << ns.message;
+            total.newton_iterations += ns.newton_iterations;
+            total.factorisations += ns.factorisations;
+            total.linear_iterations += ns.linear_iterations;
+            EXPECT_EQ(ns.linear_solver, to_string(kind));
+        }
+        results.push_back(solver.displacement_mm());
+        summaries.push_back(total);
+    }
+    double diff = 0;
+    for (std::size_t i = 0; i < results[0].size(); ++i) diff = std::max(diff, std::abs(results[0][i] - results[1][i]));
+    EXPECT_LT(diff, 1e-6);
+    EXPECT_EQ(summaries[0].factorisations, summaries[0].newton_iterations); // direct: one per iteration
+    EXPECT_LT(summaries[1].factorisations, summaries[1].newton_iterations / 2) << "the stale factor was renewed too often";
+    EXPECT_GT(summaries[1].linear_iterations, 0);
+}
+
+TEST(MechanicsImplicit, BadInputAndFailuresAreReported)
+{
+    const VolumeMesh mesh = block_mesh(4, 4, 2, 1.0);
+    const TledModel model(mesh, one_tissue(3e3, 0.45), {});
+    // Nothing fixed: six free rigid-body modes.
+    {
+        NewtonSolver solver(model);
+        Loads loads;
+        loads.external_forces_n.assign(3 * model.node_count(), 0.0);
+        loads.external_forces_n[2] = 1e-3;
+        solver.set_loads(loads);
+        EXPECT_NE(error_message([&] { solver.solve_equilibrium(1.0); }).find("not constrained: 6 rigid-body mode"), std::string::npos);
+    }
+    // One node held: three rotations free.
+    {
+        NewtonSolver solver(model);
+        Loads loads;
+        loads.constraints.push_back({"pin", {0}, {true, true, true}, Vec3::Zero()});
+        solver.set_loads(loads);
+        EXPECT_NE(error_message([&] { solver.solve_equilibrium(1.0); }).find("3 rigid-body mode"), std::string::npos);
+    }
+    // Too few iterations and no load cuts: not converged, with the residual history.
+    {
+        NewtonOptions o;
+        o.max_iterations = 1;
+        o.max_load_cuts = 0;
+        NewtonSolver solver(model, o);
+        Loads loads;
+        loads.constraints.push_back({"base", nodes_at(mesh, 2, 0.0), {true, true, true}, Vec3::Zero()});
+        loads.constraints.push_back({"top", nodes_at(mesh, 2, 2.0), {true, true, true}, Vec3(0.3, 0, -0.5)});
+        solver.set_loads(loads);
+        const NewtonSummary s = solver.solve_equilibrium(1.0);
+        EXPECT_FALSE(s.converged);
+        EXPECT_NE(s.message.find("residual history"), std::string::npos) << s.message;
+        EXPECT_EQ(max_abs(solver.displacement_mm()), 0.0) << "the state must stay at the last equilibrium";
+    }
+    // Crushing a block through itself inverts elements: an Error naming the element.
+    {
+        NewtonOptions o;
+        o.max_load_cuts = 2;
+        NewtonSolver solver(model, o);
+        Loads loads;
+        loads.constraints.push_back({"base", nodes_at(mesh, 2, 0.0), {true, true, true}, Vec3::Zero()});
+        loads.constraints.push_back({"top", nodes_at(mesh, 2, 2.0), {true, true, true}, Vec3(0, 0, -2.5)});
+        solver.set_loads(loads);
+        EXPECT_NE(error_message([&] { solver.solve_equilibrium(1.0); }).find("element"), std::string::npos);
+    }
+    // The averaged-nodal-pressure tetrahedron has no tangent.
+    {
+        TledOptions anp;
+        anp.averaged_nodal_pressure = true;
+        const TledModel tets(split_hexahedra_into_tetrahedra(mesh), one_tissue(3e3, 0.45), anp);
+        EXPECT_NE(error_message([&] { NewtonSolver solver(tets); }).find("averaged-nodal-pressure"), std::string::npos);
+    }
+}
+
+} // namespace physreg
