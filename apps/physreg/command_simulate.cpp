@@ -82,7 +82,26 @@ nlohmann::json write_simulation_outputs(const SimulationCase& c, const Simulatio
     for (const auto& s : result.equilibria)
         equilibria.push_back({{"iterations", s.iterations}, {"residual_n", s.residual_n}, {"reference_force_n", s.reference_force_n},
                               {"estimated_error_mm", s.estimated_error_mm}, {"seconds", s.seconds}});
+    nlohmann::json newton = nlohmann::json::array();
+    for (const auto& s : result.newton_solves)
+        newton.push_back({{"converged", s.converged},
+                          {"linear_solver", s.linear_solver},
+                          {"increments", s.increments},
+                          {"load_cuts", s.load_cuts},
+                          {"newton_iterations", s.newton_iterations},
+                          {"residual_history_n", s.residual_history},
+                          {"residual_n", s.residual_n},
+                          {"reference_force_n", s.reference_force_n},
+                          {"linear_iterations", s.linear_iterations},
+                          {"factorisations", s.factorisations},
+                          {"shifted_factorisations", s.shifted_factorisations},
+                          {"contact_updates", s.contact_updates},
+                          {"contact_nodes", s.contact_nodes},
+                          {"max_penetration_mm", s.max_penetration_mm},
+                          {"time_s", {{"assembly", s.assembly_s}, {"factorisation", s.factorisation_s}, {"solve", s.solve_s},
+                                      {"contact", s.contact_s}, {"line_search", s.line_search_s}, {"total", s.seconds}}}});
     nlohmann::json summary = {{"case", c.source.string()},
+                              {"method", to_string(c.method)},
                               {"mode", c.dynamic ? "dynamic" : "static"},
                               {"precision", c.single_precision ? "single" : "double"},
                               {"material_law", to_string(c.tled.law)},
@@ -91,6 +110,7 @@ nlohmann::json write_simulation_outputs(const SimulationCase& c, const Simulatio
                               {"time_step_s", result.time_step_s},
                               {"steps", result.steps},
                               {"equilibria", equilibria},
+                              {"newton", newton},
                               {"max_displacement_mm", largest},
                               {"seconds", result.seconds},
                               {"outputs", {"frames.pvd", "final.vtu", "displacement_field.nii.gz", "displacement_mask.nii.gz"}}};

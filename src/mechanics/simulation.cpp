@@ -7,6 +7,7 @@
 #include "physreg/mesh/hex_meshing.hpp"
 #include "physreg/mesh/tet_split.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <yaml-cpp/yaml.h>
 
@@ -16,6 +17,19 @@ namespace {
 
 struct Reader {
     std::string what;
+
+    /// Unknown keys are errors (a misspelt or misplaced key would otherwise be ignored silently).
+    void check_keys(const YAML::Node& node, std::initializer_list<const char*> allowed, const std::string& where) const
+    {
+        if (!node || !node.IsMap()) return;
+        for (const auto& entry : node) {
+            const auto key = entry.first.as<std::string>();
+            if (std::find_if(allowed.begin(), allowed.end(), [&](const char* a) { return key == a; }) != allowed.end()) continue;
+            std::string list;
+            for (const char* a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
+            fail("{}: unknown key '{}' in {} (accepted there: {})", what, key, where, list);
+        }
+    }
 
     template <typename T>
     T get(const YAML::Node& node, const std::string& key, const std::string& where) const
@@ -47,6 +61,8 @@ struct Reader {
     NodeSelection selection(const YAML::Node& node, const std::string& where) const
     {
         if (!node || !node.IsMap()) fail("{}: {} needs a 'select' map (face, box or nodes)", what, where);
+        check_keys(node, {"face", "tolerance_mm", "box", "nodes", "surface_only"}, where + ".select");
+        if (node["box"]) check_keys(node["box"], {"min", "max"}, where + ".select.box");
         NodeSelection s;
         if (node["face"]) {
             const std::string face = get<std::string>(node["face"], "face", where); // e.g. "y_min"
@@ -88,6 +104,8 @@ SimulationCase read_simulation_case(const fs::path& path)
         fail("{}: not valid YAML: {}", r.what, e.what());
     }
     if (!root.IsMap()) fail("{}: expected a map", r.what);
+    r.check_keys(root, {"mesh", "labels", "grid", "tissues", "element", "material_law", "solver", "constraints", "forces", "indenters", "output"},
+                 "the case");
     SimulationCase c;
     c.source = path;
     if (root["mesh"]) c.mesh_file = resolve(path, r.get<std::string>(root["mesh"], "mesh", "the case"));
@@ -105,10 +123,42 @@ SimulationCase read_simulation_case(const fs::path& path)
     const YAML::Node solver = root["solver"];
     if (solver) {
         const std::string where = "solver";
+        r.check_keys(solver,
+                     {"method", "mode", "precision", "duration_s", "ramp_time_s", "damping_per_s", "hourglass_kappa", "hourglass_modulus",
+                      "averaged_nodal_pressure", "time_step_safety", "density_scale", "time_step_s", "load_steps",
+                      "displacement_tolerance_mm", "residual_tolerance", "max_iterations", "linear", "tolerance",
+                      "penetration_tolerance_mm", "max_load_cuts"},
+                     where);
         if (solver["mode"]) {
             const auto mode = r.get<std::string>(solver["mode"], "mode", where);
             if (mode != "static" && mode != "dynamic") fail("{}: solver.mode '{}' must be static or dynamic", r.what, mode);
-            c.dynamic = mode == "dynamic";
+            c.method = mode == "dynamic" ? SimulationCase::Method::explicit_dynamics : SimulationCase::Method::relaxation;
+        }
+        if (solver["method"]) {
+            const auto method = r.get<std::string>(solver["method"], "method", where);
+            SimulationCase::Method m;
+            if (method == "relaxation") m = SimulationCase::Method::relaxation;
+            else if (method == "newton") m = SimulationCase::Method::newton;
+            else if (method == "explicit") m = SimulationCase::Method::explicit_dynamics;
+            else if (method == "backward-euler")
+                fail("{}: solver.method 'backward-euler' is not available yet (static: newton or relaxation; dynamics: explicit)", r.what);
+            else fail("{}: solver.method '{}' must be relaxation, newton or explicit", r.what, method);
+            if (solver["mode"] && m != c.method) fail("{}: solver.mode and solver.method disagree", r.what);
+            c.method = m;
+        }
+        c.dynamic = c.method == SimulationCase::Method::explicit_dynamics;
+        const bool newton = c.method == SimulationCase::Method::newton;
+        for (const char* key : {"linear", "tolerance", "penetration_tolerance_mm", "max_load_cuts"})
+            if (solver[key] && !newton) fail("{}: solver.{} applies to method: newton only", r.what, key);
+        for (const char* key : {"displacement_tolerance_mm", "residual_tolerance"})
+            if (solver[key] && newton) fail("{}: solver.{} applies to method: relaxation (newton takes 'tolerance')", r.what, key);
+        if (newton) {
+            if (solver["linear"]) c.newton.linear.kind = parse_linear_solver(r.get<std::string>(solver["linear"], "linear", where));
+            c.newton.residual_tolerance = r.number(solver, "tolerance", where, c.newton.residual_tolerance);
+            c.newton.penetration_tolerance_mm = r.number(solver, "penetration_tolerance_mm", where, c.newton.penetration_tolerance_mm);
+            c.newton.max_load_cuts = static_cast<int>(r.number(solver, "max_load_cuts", where, c.newton.max_load_cuts));
+            c.newton.max_iterations = static_cast<int>(r.number(solver, "max_iterations", where, c.newton.max_iterations));
+            c.newton.validate();
         }
         if (solver["precision"]) {
             const auto p = r.get<std::string>(solver["precision"], "precision", where);
@@ -132,8 +182,11 @@ SimulationCase read_simulation_case(const fs::path& path)
         c.load_steps = static_cast<int>(r.number(solver, "load_steps", where, 1));
         c.equilibrium.displacement_tolerance_mm = r.number(solver, "displacement_tolerance_mm", where, c.equilibrium.displacement_tolerance_mm);
         c.equilibrium.residual_tolerance = r.number(solver, "residual_tolerance", where, c.equilibrium.residual_tolerance);
-        c.equilibrium.max_iterations = static_cast<long>(r.number(solver, "max_iterations", where, double(c.equilibrium.max_iterations)));
+        if (!newton)
+            c.equilibrium.max_iterations = static_cast<long>(r.number(solver, "max_iterations", where, double(c.equilibrium.max_iterations)));
     }
+    if (c.method == SimulationCase::Method::newton && c.single_precision)
+        fail("{}: solver.precision single applies to relaxation and explicit; newton runs in double precision", r.what);
     c.tled.validate();
     c.equilibrium.validate();
     if (c.dynamic && !(c.duration_s > 0)) fail("{}: a dynamic run needs solver.duration_s > 0", r.what);
@@ -144,6 +197,7 @@ SimulationCase read_simulation_case(const fs::path& path)
     for (const auto& node : root["constraints"]) {
         SimulationCase::Constraint k;
         const std::string where = fmt::format("constraints[{}]", index++);
+        r.check_keys(node, {"name", "select", "fixed", "displacement_mm"}, where);
         k.name = node["name"] ? r.get<std::string>(node["name"], "name", where) : where;
         k.select = r.selection(node["select"], where);
         if (node["fixed"]) {
@@ -164,6 +218,7 @@ SimulationCase read_simulation_case(const fs::path& path)
     for (const auto& node : root["forces"]) {
         SimulationCase::Force f;
         const std::string where = fmt::format("forces[{}]", index++);
+        r.check_keys(node, {"name", "select", "total_force_n"}, where);
         f.name = node["name"] ? r.get<std::string>(node["name"], "name", where) : where;
         f.select = r.selection(node["select"], where);
         f.total_force_n = r.vec3(node["total_force_n"], "total_force_n", where);
@@ -173,6 +228,7 @@ SimulationCase read_simulation_case(const fs::path& path)
     for (const auto& node : root["indenters"]) {
         Indenter i;
         const std::string where = fmt::format("indenters[{}]", index++);
+        r.check_keys(node, {"name", "shape", "radius_mm", "axis", "normal", "half_extents_mm", "path_mm"}, where);
         i.name = node["name"] ? r.get<std::string>(node["name"], "name", where) : where;
         i.shape = parse_indenter_shape(node["shape"] ? r.get<std::string>(node["shape"], "shape", where) : "");
         i.radius_mm = r.number(node, "radius_mm", where, 0.0);
@@ -188,6 +244,7 @@ SimulationCase read_simulation_case(const fs::path& path)
 
     const YAML::Node output = root["output"];
     if (!output || !output["directory"]) fail("{}: needs output.directory", r.what);
+    r.check_keys(output, {"directory", "frames", "field_spacing_mm"}, "output");
     c.output_directory = resolve(path, r.get<std::string>(output["directory"], "directory", "output"));
     c.frames = static_cast<int>(r.number(output, "frames", "output", 1));
     if (c.frames < 1) fail("{}: output.frames must be ≥ 1", r.what);
@@ -215,6 +272,22 @@ void run(const SimulationCase& c, const TledModel& model, const Loads& loads, Si
         result.steps = solver.steps();
         return;
     }
+    if (c.method == SimulationCase::Method::newton) {
+        NewtonSolver newton(model, c.newton);
+        newton.set_loads(loads);
+        for (int step = 1; step <= c.load_steps; ++step) {
+            const double factor = double(step) / c.load_steps;
+            const NewtonSummary s = newton.solve_equilibrium(factor, [&](double, long iteration) {
+                if (progress) progress((step - 1 + 0.5) / c.load_steps, fmt::format("load step {}/{}, Newton iteration {}", step, c.load_steps, iteration));
+            });
+            result.newton_solves.push_back(s);
+            if (!s.converged) fail("load step {}/{}: {}", step, c.load_steps, s.message);
+            logger()->info("load step {}/{}: {}", step, c.load_steps, s.message);
+            if (progress) progress(double(step) / c.load_steps, fmt::format("load step {}/{} done", step, c.load_steps));
+            result.frames.push_back({0.0, factor, newton.displacement_mm()});
+        }
+        return;
+    }
     for (int step = 1; step <= c.load_steps; ++step) {
         const double factor = double(step) / c.load_steps;
         const SolveSummary s = solver.solve_equilibrium(c.equilibrium, factor, [&](double, long iteration) {
@@ -230,6 +303,15 @@ void run(const SimulationCase& c, const TledModel& model, const Loads& loads, Si
 }
 
 } // namespace
+
+std::string to_string(SimulationCase::Method method)
+{
+    switch (method) {
+    case SimulationCase::Method::newton: return "newton";
+    case SimulationCase::Method::explicit_dynamics: return "explicit";
+    default: return "relaxation";
+    }
+}
 
 SimulationResult run_simulation(const SimulationCase& c, const std::function<void(double, const std::string&)>& progress)
 {

@@ -129,6 +129,19 @@ expect_error "simulate: crushing load" "inverted" "$physreg" simulate "$work/bad
 [ -z "$(ls -A "$work/bad3" 2>/dev/null)" ] && pass || failed "no outputs after an inverted run"
 sed 's/face: y_max/nodes: [0, 99999999]/; s/, tolerance_mm: 3//; s/directory: sim/directory: bad4/' "$work/push.yaml" > "$work/bad4.yaml"
 expect_error "simulate: missing nodes" "does not exist" "$physreg" simulate "$work/bad4.yaml"
+# The same push by Newton's method; its summary names the method and reports the Newton details.
+sed 's/mode: static, load_steps: 2/method: newton, load_steps: 2, linear: cholmod/; s/directory: sim/directory: newton/' "$work/push.yaml" > "$work/newton.yaml"
+expect_ok "simulate newton" "$physreg" simulate "$work/newton.yaml" --json
+grep -q '"method": "newton"' "$work/newton/summary.json" && pass || failed "summary names the method"
+grep -q '"newton_iterations"' "$work/newton/summary.json" && pass || failed "summary reports Newton iterations"
+# Unknown or misplaced keys are errors naming the key, the file and the accepted keys.
+{ cat "$work/push.yaml"; echo "bogus_key: 1"; } | sed 's/directory: sim/directory: bad5/' > "$work/bad5.yaml"
+expect_error "simulate: unknown key" "unknown key 'bogus_key'" "$physreg" simulate "$work/bad5.yaml"
+{ cat "$work/push.yaml"; echo "method: newton"; } | sed 's/directory: sim/directory: bad6/' > "$work/bad6.yaml"
+expect_error "simulate: method outside solver" "unknown key 'method' in the case" "$physreg" simulate "$work/bad6.yaml"
+sed 's/mode: static, load_steps: 2/method: newton, load_steps: 2, displacement_tolerance_mm: 1e-3/; s/directory: sim/directory: bad7/' "$work/push.yaml" > "$work/bad7.yaml"
+expect_error "simulate: relaxation key under newton" "applies to method: relaxation" "$physreg" simulate "$work/bad7.yaml"
+[ -z "$(ls -A "$work/bad5" "$work/bad6" "$work/bad7" 2>/dev/null)" ] && pass || failed "no outputs after refused cases"
 
 # physreg phantom: the small preset, its manifest, bad input leaving nothing behind.
 expect_ok "phantom small" "$physreg" --log-level warn phantom --preset small --seed 3 -o "$work/ph" --json

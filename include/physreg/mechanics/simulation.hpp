@@ -2,6 +2,7 @@
 // A simulation case (what `physreg simulate CASE.yaml` runs): the model, loads, solver settings
 // and outputs, read from YAML; and the run itself.
 #include "physreg/image/image_geometry.hpp"
+#include "physreg/mechanics/newton_solver.hpp"
 #include "physreg/mechanics/node_selection.hpp"
 #include "physreg/mechanics/tled_solver.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
@@ -22,7 +23,13 @@ struct SimulationCase {
     TledOptions tled;
     std::optional<double> time_step_s;   ///< explicit step; refused above the critical step
     bool single_precision = false;
-    bool dynamic = false;                ///< explicit dynamics for duration_s; else static equilibrium
+    /// How the case is solved: static equilibrium by dynamic relaxation or by Newton's method, or
+    /// explicit dynamics for duration_s (`solver.method`; the older `solver.mode` static/dynamic
+    /// means relaxation/explicit).
+    enum class Method { relaxation, newton, explicit_dynamics };
+    Method method = Method::relaxation;
+    bool dynamic = false;                ///< method == explicit_dynamics
+    NewtonOptions newton;
     double duration_s = 0.0;
     int load_steps = 1;                  ///< static: equilibria at 1/n, 2/n, …, 1 of the load
     EquilibriumOptions equilibrium;
@@ -50,6 +57,7 @@ struct SimulationCase {
 
 /// Reads and validates a case file. Throws Error naming the key and the reason.
 SimulationCase read_simulation_case(const std::filesystem::path& path);
+std::string to_string(SimulationCase::Method method); ///< relaxation | newton | explicit
 
 struct SimulationFrame {
     double time_s = 0.0;       ///< dynamic runs
@@ -60,7 +68,8 @@ struct SimulationFrame {
 struct SimulationResult {
     VolumeMesh mesh;
     std::vector<SimulationFrame> frames;   ///< the last is the final state
-    std::vector<SolveSummary> equilibria;  ///< static runs: one per load step
+    std::vector<SolveSummary> equilibria;  ///< relaxation: one per load step
+    std::vector<NewtonSummary> newton_solves; ///< newton: one per load step
     double critical_time_step_s = 0.0;
     double time_step_s = 0.0;
     long steps = 0;
