@@ -118,7 +118,8 @@ void add_subcommand_bench(CLI::App& app)
         bar.finish();
         const TreReport hr = pool_tre(tre_hr), c2f = pool_tre(tre_c2f);
         const double mean_hr = mean_of(all_hr), mean_c2f = mean_of(all_c2f);
-        report["summary"] = {{"high_resolution_ms_per_update", mean_hr},
+        report["summary"] = {{"method", o->model.solver},
+                             {"high_resolution_ms_per_update", mean_hr},
                              {"coarse_to_fine_ms_per_update", mean_c2f},
                              {"coarse_to_fine_split_ms", {{"coarse_equilibrium", mean_of(all_coarse)},
                                                           {"match_synthesis_landmarks", mean_of(all_synthesis)}}},
@@ -129,9 +130,9 @@ void add_subcommand_bench(CLI::App& app)
                              {"meets_coarse_to_fine_target", mean_c2f <= 10.0},
                              {"meets_high_resolution_target", mean_hr <= 100.0},
                              {"meets_tre_target", c2f.all.mean_mm - hr.all.mean_mm <= 0.5}};
-        std::cerr << fmt::format("bench enrich ({} threads): high resolution {:.1f} ms/update, coarse-to-fine {:.1f} ms/update, speed-up "
+        std::cerr << fmt::format("bench enrich ({}, {} threads): high resolution {:.1f} ms/update, coarse-to-fine {:.1f} ms/update, speed-up "
                                  "{:.1f}×; TRE at the final depth {:.3f} vs {:.3f} mm\n",
-                                 omp_get_max_threads(), mean_hr, mean_c2f, mean_hr / mean_c2f, hr.all.mean_mm, c2f.all.mean_mm);
+                                 o->model.solver, omp_get_max_threads(), mean_hr, mean_c2f, mean_hr / mean_c2f, hr.all.mean_mm, c2f.all.mean_mm);
         if (!o->output.empty())
             write_atomically(o->output, [&](const fs::path& tmp) { std::ofstream(tmp) << report.dump(2) << "\n"; });
         if (o->json) std::cout << report.dump(2) << std::endl;

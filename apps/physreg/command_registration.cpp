@@ -162,6 +162,7 @@ void add_subcommand_register_compression(CLI::App& app)
                         {"nodes", model.mesh.node_count()},
                         {"hexahedra", model.mesh.cell_count()},
                         {"interface_points", model.coupling.points().size()},
+                        {"method", o->model.solver},
                         {"iterations", prediction.iterations},
                         {"seconds", prediction.seconds},
                         {"max_displacement_mm", prediction.max_displacement_mm},

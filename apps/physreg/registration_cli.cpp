@@ -34,6 +34,8 @@ void add_model_options(CLI::App* sub, ModelOptions& m)
                                                   "it if elements under the tool invert)");
     sub->add_option("--tolerance", m.tolerance_mm, "Equilibrium: estimated distance to equilibrium, mm (default 1e-3)");
     sub->add_option("--residual", m.residual, "Equilibrium: largest free residual / largest internal force (default 1e-3)");
+    sub->add_option("--solver", m.solver, "Static solver: relaxation (dynamic relaxation, default: the faster on these models) or newton "
+                                          "(Newton's method, assembled tangent, stale-factor PCG; residual 1e-7 of the largest force)");
 }
 
 PredictionOptions prediction_options(const ModelOptions& m)
@@ -42,6 +44,7 @@ PredictionOptions prediction_options(const ModelOptions& m)
     if (!(m.tolerance_mm > 0 && m.tolerance_mm <= 1.0)) fail("--tolerance must lie in (0, 1] mm (got {})", m.tolerance_mm);
     if (!(m.residual > 0 && m.residual < 1.0)) fail("--residual must lie in (0, 1) (got {})", m.residual);
     PredictionOptions p;
+    p.method = parse_static_method(m.solver);
     p.tool_speed_per_cell = m.tool_speed;
     p.equilibrium.displacement_tolerance_mm = m.tolerance_mm;
     p.equilibrium.residual_tolerance = m.residual;

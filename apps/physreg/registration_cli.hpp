@@ -24,6 +24,7 @@ struct ModelOptions {
     double tool_speed = PredictionOptions{}.tool_speed_per_cell;
     double tolerance_mm = PredictionOptions{}.equilibrium.displacement_tolerance_mm;
     double residual = PredictionOptions{}.equilibrium.residual_tolerance;
+    std::string solver = "relaxation";
 };
 void add_model_options(CLI::App* sub, ModelOptions& m);
 ModelParameters model_parameters(const ModelOptions& m, ModelParameters p);

@@ -110,7 +110,7 @@ EnrichmentDatabase build_sequence(const LiverModel& fine, const LiverModel& coar
     for (const auto& c : conditions) tool.path.push_back(contact + c.depth_mm * d);
     const double steps = double(conditions.size());
     auto solver_for = [&](const LiverModel& m) {
-        auto solver = std::make_unique<TledSolver<double>>(*m.tled);
+        auto solver = std::make_unique<StaticSolver>(*m.tled, StaticSolverOptions{options.method, options.equilibrium, options.newton});
         solver->set_coupling(m.coupling.empty() ? nullptr : &m.coupling);
         Loads loads;
         loads.constraints.push_back({"posterior_support", m.fixed_nodes, {true, true, true}, Vec3::Zero()});
@@ -123,18 +123,17 @@ EnrichmentDatabase build_sequence(const LiverModel& fine, const LiverModel& coar
     for (std::size_t i = 0; i < conditions.size(); ++i) {
         const double travel = conditions[i].depth_mm - previous_depth;
         previous_depth = conditions[i].depth_mm;
-        auto solve = [&](TledSolver<double>& solver, const LiverModel& m, const char* level) {
-            EquilibriumOptions o = options.equilibrium;
-            o.ramp_iterations = std::max<long>(o.ramp_iterations,
-                                               std::lround(std::ceil(1.875 * travel / (options.tool_speed_per_cell * m.cell_size_mm.minCoeff()))));
+        auto solve = [&](StaticSolver& solver, const LiverModel& m, const char* level) {
+            const long ramp = std::max<long>(options.equilibrium.ramp_iterations,
+                                             std::lround(std::ceil(1.875 * travel / (options.tool_speed_per_cell * m.cell_size_mm.minCoeff()))));
             const std::string what = fmt::format("enrichment condition {} {:.2f} mm, {} model", conditions[i].position, conditions[i].depth_mm, level);
-            SolveSummary s;
+            StaticSolveResult s;
             try {
-                s = solver.solve_equilibrium(o, double(i + 1) / steps);
+                s = solver.solve(double(i + 1) / steps, ramp);
             } catch (const Error& e) {
                 fail("{}: {} (drop this depth or position from the plan, or lower --tool-speed)", what, e.what());
             }
-            if (!s.converged()) fail("{}: {}", what, s.message);
+            if (!s.converged) fail("{}: {}", what, s.message);
             return solver.displacement_mm();
         };
         const auto fu = solve(*fine_solver, fine, "fine");

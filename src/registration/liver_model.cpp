@@ -273,18 +273,18 @@ CompressionPrediction predict_compression(const LiverModel& model, const Indente
     const double travel = depth + back;
     equilibrium.ramp_iterations = std::max<long>(equilibrium.ramp_iterations,
                                                  std::lround(std::ceil(1.875 * travel / (options.tool_speed_per_cell * model.cell_size_mm.minCoeff()))));
-    TledSolver<double> solver(*model.tled);
+    StaticSolver solver(*model.tled, {options.method, equilibrium, options.newton});
     solver.set_coupling(model.coupling.empty() ? nullptr : &model.coupling);
     solver.set_loads(loads);
     CompressionPrediction out;
     const auto t0 = std::chrono::steady_clock::now();
-    SolveSummary summary;
+    StaticSolveResult summary;
     try {
-        summary = solver.solve_equilibrium(equilibrium, 1.0);
+        summary = solver.solve(1.0);
     } catch (const Error& e) {
         fail("{}: {}", what, e.what());
     }
-    if (!summary.converged()) fail("{}: {}", what, summary.message);
+    if (!summary.converged) fail("{}: {}", what, summary.message);
     out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     out.iterations = summary.iterations;
     out.displacement_mm = solver.displacement_mm();
@@ -298,7 +298,7 @@ CompressionPrediction predict_compression(const LiverModel& model, const Indente
 }
 
 CompressionTracker::CompressionTracker(const LiverModel& model, const Indenter& tool, const PredictionOptions& options)
-    : m_model(model), m_tool(tool), m_options(options), m_solver(*model.tled)
+    : m_model(model), m_tool(tool), m_options(options), m_solver(*model.tled, {options.method, options.equilibrium, options.newton})
 {
     if (tool.path.size() < 2) fail("tracker: the tool needs a path from first contact onwards");
     const Vec3 d = (tool.path.back() - tool.path.front()).normalized();
@@ -318,7 +318,6 @@ CompressionTracker::Update CompressionTracker::move_to(const Vec3& position, con
     loads.indenters.push_back(tool);
     m_solver.set_loads(loads);
     m_solver.reset_load_factor();
-    EquilibriumOptions o = m_options.equilibrium;
     const double travel = (position - m_position).norm();
     const std::vector<double> current = m_solver.displacement_mm();
     if (!m_previous.empty() && m_previous_travel > 0) {
@@ -327,23 +326,23 @@ CompressionTracker::Update CompressionTracker::move_to(const Vec3& position, con
         for (std::size_t k = 0; k < guess.size(); ++k) guess[k] = current[k] + ratio * (current[k] - m_previous[k]);
         m_solver.set_displacement(guess);
     }
-    o.ramp_iterations = std::max<long>(1, std::lround(std::ceil(1.875 * travel / (m_options.tool_speed_per_cell * m_model.cell_size_mm.minCoeff()))));
+    const long ramp = std::max<long>(1, std::lround(std::ceil(1.875 * travel / (m_options.tool_speed_per_cell * m_model.cell_size_mm.minCoeff()))));
     const auto t0 = std::chrono::steady_clock::now();
-    SolveSummary s;
+    StaticSolveResult s;
     try {
-        s = m_solver.solve_equilibrium(o, 1.0);
+        s = m_solver.solve(1.0, ramp);
     } catch (const Error& e) {
         if (m_previous.empty()) fail("{}: {}", what, e.what());
         // The extrapolated guess folded an element: start from the last equilibrium instead.
         m_solver.set_displacement(current);
         m_solver.reset_load_factor();
         try {
-            s = m_solver.solve_equilibrium(o, 1.0);
+            s = m_solver.solve(1.0, ramp);
         } catch (const Error& again) {
             fail("{}: {}", what, again.what());
         }
     }
-    if (!s.converged()) fail("{}: {}", what, s.message);
+    if (!s.converged) fail("{}: {}", what, s.message);
     m_previous = current;
     m_previous_travel = travel;
     m_position = position;

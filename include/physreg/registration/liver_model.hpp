@@ -11,6 +11,7 @@
 #include "physreg/image/image_geometry.hpp"
 #include "physreg/mechanics/loads.hpp"
 #include "physreg/mechanics/tissue_coupling.hpp"
+#include "physreg/mechanics/static_solver.hpp"
 #include "physreg/mechanics/tled_solver.hpp"
 #include "physreg/mesh/coarsen.hpp"
 #include "physreg/phantom/abdominal_phantom.hpp"
@@ -70,6 +71,10 @@ LiverModel build_liver_model(const LabelVolume& rest_labels, const LabelRoles& r
 LiverModel coarsen_liver_model(const LiverModel& fine, const Index3& grid, std::vector<NodeEmbedding>* fine_nodes = nullptr);
 
 struct PredictionOptions {
+    /// Static solver: dynamic relaxation (default: measured faster on these models, see
+    /// bench/README.md) or Newton's method; both reach the same equilibrium.
+    StaticMethod method = StaticMethod::relaxation;
+    NewtonOptions newton;
     EquilibriumOptions equilibrium = default_equilibrium();
     /// Largest tool travel per relaxation iteration, in smallest-cell sizes (sets the tool ramp).
     double tool_speed_per_cell = 0.01;
@@ -112,7 +117,7 @@ private:
     const LiverModel& m_model;
     Indenter m_tool;
     PredictionOptions m_options;
-    TledSolver<double> m_solver;
+    StaticSolver m_solver;
     Vec3 m_position;
     std::vector<double> m_previous; ///< the equilibrium before the current one (extrapolation)
     double m_previous_travel = 0.0;

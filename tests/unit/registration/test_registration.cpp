@@ -115,6 +115,29 @@ TEST(LiverModel, VariantsShareTheMeshAndPredictTheCompression)
     EXPECT_NE(tre[ModelVariant::coupled].all.mean_mm, tre[ModelVariant::shared_nodes].all.mean_mm);
 }
 
+TEST(LiverModel, NewtonAndRelaxationPredictTheSameCompression)
+{
+    // The 3-label phantom (parenchyma, vessels, tumours with MLS coupling): Newton's equilibrium and
+    // dynamic relaxation's (tightened) agree within 1e-4 of the peak displacement.
+    const auto& d = small();
+    const auto cases = compression_cases(d.dataset, {"B"});
+    const LiverModel model = build_liver_model(d.labels, d.dataset.roles, small_model(ModelVariant::coupled), "small rest");
+    PredictionOptions relaxation;
+    relaxation.equilibrium.displacement_tolerance_mm = 1e-6;
+    relaxation.equilibrium.residual_tolerance = 1e-7;
+    relaxation.equilibrium.max_iterations = 1000000;
+    PredictionOptions newton;
+    newton.method = StaticMethod::newton;
+    newton.newton.residual_tolerance = 1e-9;
+    newton.newton.penetration_tolerance_mm = 1e-6;
+    const auto a = predict_compression(model, cases[0].tool, d.rest, relaxation, "B relaxation");
+    const auto b = predict_compression(model, cases[0].tool, d.rest, newton, "B newton");
+    double diff = 0;
+    for (std::size_t i = 0; i < a.displacement_mm.size(); ++i) diff = std::max(diff, std::abs(a.displacement_mm[i] - b.displacement_mm[i]));
+    EXPECT_GT(a.max_displacement_mm, 1.0);
+    EXPECT_LT(diff, 1e-4 * a.max_displacement_mm) << diff << " mm of a peak " << a.max_displacement_mm << " mm";
+}
+
 TEST(LiverModel, ParameterFileRoundTripAndBadValues)
 {
     test::TempDir dir;
