@@ -66,7 +66,34 @@ TEST(MechanicsSimulationCase, BadCasesNameTheKeyAndReason)
     EXPECT_NE(error_of([&] { run_simulation(read_simulation_case(with("load_steps: 2", "load_steps: 2, time_step_s: 1.0")), {}); })
                   .find("above the critical time step"),
               std::string::npos);
+    // Unknown and misplaced keys name the key, where it is, and what is accepted there.
+    const std::string bogus = error_of([&] { read_simulation_case(with("load_steps: 2", "load_steps: 2, bogus_key: 1")); });
+    EXPECT_NE(bogus.find("unknown key 'bogus_key' in solver"), std::string::npos) << bogus;
+    EXPECT_NE(bogus.find("accepted there: method"), std::string::npos) << bogus;
+    EXPECT_NE(error_of([&] { read_simulation_case(with("fixed: [x, y, z]", "fixed: [x, y, z]\n    fix: [x]")); }).find("unknown key 'fix'"),
+              std::string::npos);
+    EXPECT_NE(error_of([&] { read_simulation_case(with("mesh: block.vtu", "mesh: block.vtu\nmethod: newton")); }).find("unknown key 'method' in the case"),
+              std::string::npos);
+    EXPECT_NE(error_of([&] { read_simulation_case(with("mode: static", "method: backward-euler")); }).find("not available yet"), std::string::npos);
+    EXPECT_NE(error_of([&] { read_simulation_case(with("mode: static", "mode: dynamic, method: newton")); }).find("disagree"), std::string::npos);
+    // Newton runs the same case to the same answer as relaxation.
+    {
+        std::ofstream(dir / "relax.yaml") << kCase;
+        std::string text = kCase;
+        text.replace(text.find("mode: static"), 12, "method: newton, linear: cholmod");
+        std::ofstream(dir / "newton.yaml") << text;
+        const auto a = run_simulation(read_simulation_case(dir / "relax.yaml"), {});
+        const auto b = run_simulation(read_simulation_case(dir / "newton.yaml"), {});
+        ASSERT_EQ(b.newton_solves.size(), 2u);
+        EXPECT_TRUE(b.newton_solves.back().converged);
+        EXPECT_TRUE(b.equilibria.empty());
+        double diff = 0;
+        for (std::size_t i = 0; i < a.frames.back().displacement_mm.size(); ++i)
+            diff = std::max(diff, std::abs(a.frames.back().displacement_mm[i] - b.frames.back().displacement_mm[i]));
+        EXPECT_LT(diff, 1e-2); // relaxation's default criterion is 1e-3 mm
+    }
     std::ofstream(dir / "tissues.yaml") << "tissues: [{label: 1, name: t, young_modulus_pa: 3000, poisson_ratio: 0.5}]\n";
+    with("load_steps: 2", "load_steps: 2"); // the valid case again, with the impossible tissue
     EXPECT_NE(error_of([&] { run_simulation(read_simulation_case(dir / "bad.yaml"), {}); }).find("poisson_ratio"), std::string::npos);
 }
 
