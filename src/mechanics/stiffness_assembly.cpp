@@ -105,16 +105,6 @@ std::int64_t StiffnessAssembler::value_index(std::int32_t i, std::int32_t j, int
     return m_outer[3 * j + c] + 3 * (it - begin) + r;
 }
 
-namespace {
-
-// One element: energy, forces into f, and (if values) its blocks into the matrix.
-struct ElementWork {
-    double energy = 0.0;
-    bool inverted = false, non_finite = false;
-};
-
-} // namespace
-
 Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* stiffness) const
 {
     const std::size_t n = m_model.node_count(), e_count = m_model.element_count();
