@@ -1,6 +1,7 @@
 #include "physreg/mechanics/material.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/core/types.hpp"
 
 namespace physreg {
 
@@ -9,7 +10,8 @@ MaterialLaw parse_material_law(const std::string& text)
     if (text == "neo-hookean" || text == "neo_hookean") return MaterialLaw::neo_hookean;
     if (text == "svk" || text == "st-venant-kirchhoff") return MaterialLaw::st_venant_kirchhoff;
     if (text == "linear" || text == "linear-elastic") return MaterialLaw::linear_elastic;
-    fail("material law '{}' is not one of neo-hookean, svk, linear", text);
+    if (text == "corotational" || text == "co-rotational") return MaterialLaw::corotational;
+    fail("material law '{}' is not one of neo-hookean, svk, linear, corotational", text);
 }
 
 std::string to_string(MaterialLaw law)
@@ -17,6 +19,7 @@ std::string to_string(MaterialLaw law)
     switch (law) {
     case MaterialLaw::neo_hookean: return "neo-hookean";
     case MaterialLaw::st_venant_kirchhoff: return "svk";
+    case MaterialLaw::corotational: return "corotational";
     default: return "linear";
     }
 }
@@ -45,6 +48,36 @@ double first_piola_tangent(MaterialLaw law, const ElasticMaterial& m, const doub
     const double mu = m.mu_mpa, lambda = m.lambda_mpa, kappa = m.kappa_mpa;
     const auto d = [](int i, int j) { return i == j ? 1.0 : 0.0; };
     const double j = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) + f[2] * (f[3] * f[7] - f[4] * f[6]);
+    if (law == MaterialLaw::corotational) {
+        double r[9];
+        polar_rotation(f, r);
+        double u[3][3]; // U = Rᵀ F (symmetric up to round-off)
+        for (int I = 0; I < 3; ++I)
+            for (int J = 0; J < 3; ++J) u[I][J] = r[I] * f[J] + r[3 + I] * f[3 + J] + r[6 + I] * f[6 + J];
+        const double trace = u[0][0] + u[1][1] + u[2][2];
+        Mat3 g;
+        for (int I = 0; I < 3; ++I)
+            for (int J = 0; J < 3; ++J) g(I, J) = trace * d(I, J) - 0.5 * (u[I][J] + u[J][I]);
+        const Mat3 g_inverse = g.inverse(); // tr U I − U is positive definite for det F > 0
+        const double rotation_coefficient = lambda * (trace - 3.0) - 2.0 * mu;
+        for (int k = 0; k < 3; ++k)
+            for (int L = 0; L < 3; ++L) {
+                // Y = Rᵀ dF − dFᵀ R for dF = e_k e_Lᵀ: Y_IJ = R_kI δ_JL − δ_IL R_kJ.
+                double y[3][3];
+                for (int I = 0; I < 3; ++I)
+                    for (int J = 0; J < 3; ++J) y[I][J] = r[3 * k + I] * d(J, L) - d(I, L) * r[3 * k + J];
+                const Vec3 axial(y[2][1], y[0][2], y[1][0]);
+                const Vec3 w = g_inverse * axial;
+                const double omega[3][3] = {{0.0, -w[2], w[1]}, {w[2], 0.0, -w[0]}, {-w[1], w[0], 0.0}};
+                for (int i = 0; i < 3; ++i)
+                    for (int J = 0; J < 3; ++J) {
+                        const double dr = r[3 * i] * omega[0][J] + r[3 * i + 1] * omega[1][J] + r[3 * i + 2] * omega[2][J];
+                        a[9 * (3 * i + J) + 3 * k + L] =
+                            2.0 * mu * d(i, k) * d(J, L) + lambda * r[3 * i + J] * r[3 * k + L] + rotation_coefficient * dr;
+                    }
+            }
+        return f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) + f[2] * (f[3] * f[7] - f[4] * f[6]);
+    }
     if (law == MaterialLaw::linear_elastic) {
         // P = λ tr(ε) I + 2μ ε, ε = sym(F) − I.
         for (int i = 0; i < 3; ++i)

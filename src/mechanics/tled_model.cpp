@@ -151,6 +151,13 @@ double hourglass_modulus_mpa(const TledOptions& options, const ElasticMaterial& 
 double strain_energy_density(MaterialLaw law, const ElasticMaterial& m, const Mat3& f)
 {
     const double j = f.determinant();
+    if (law == MaterialLaw::corotational) {
+        Mat3 r;
+        // Column-major storage reads as Fᵀ = Rᵀ (R U Rᵀ), whose polar rotation Rᵀ comes back stored as R.
+        polar_rotation(f.data(), r.data());
+        const double excess = (r.transpose() * f).trace() - 3.0;
+        return m.mu_mpa * (f - r).squaredNorm() + 0.5 * m.lambda_mpa * excess * excess;
+    }
     if (law == MaterialLaw::linear_elastic) {
         const Mat3 eps = 0.5 * (f + f.transpose()) - Mat3::Identity();
         return 0.5 * m.lambda_mpa * eps.trace() * eps.trace() + m.mu_mpa * eps.squaredNorm();

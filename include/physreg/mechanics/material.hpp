@@ -10,15 +10,22 @@
 // with μ = E / (2(1 + ν)) and κ = E / (3(1 − 2ν)).
 // St Venant–Kirchhoff: S = λ tr(E) I + 2 μ E, E = (C − I)/2.
 // Small-strain linear elastic: P = σ = λ tr(ε) I + 2 μ ε, ε = sym(F) − I.
+// Co-rotational linear (paper 001, Müller & Gross 2004 with the polar rotation): F = R U (polar
+// decomposition), the linear law in the rotated frame, ε = U − I:
+//   Ψ = μ |F − R|² + λ/2 (tr(RᵀF) − 3)²,  P = 2μ (F − R) + λ (tr(RᵀF) − 3) R.
+// For a linear tetrahedron V P b_a is exactly the classical element force R K₀ (Rᵀx − X); unlike
+// the small-strain law it gives zero force under any rigid rotation.
 #include "physreg/model/tissue_table.hpp"
 
 #include <cmath>
+#include <limits>
 #include <string>
 
 namespace physreg {
 
-enum class MaterialLaw { neo_hookean, st_venant_kirchhoff, linear_elastic };
-MaterialLaw parse_material_law(const std::string& text); ///< "neo-hookean", "svk", "linear"
+enum class MaterialLaw { neo_hookean, st_venant_kirchhoff, linear_elastic, corotational };
+/// "neo-hookean", "svk", "linear", "corotational"
+MaterialLaw parse_material_law(const std::string& text);
 std::string to_string(MaterialLaw law);
 
 struct ElasticMaterial {
@@ -35,6 +42,50 @@ struct ElasticMaterial {
 /// Throws Error naming the tissue for impossible parameters.
 ElasticMaterial material_from_tissue(const Tissue& tissue);
 
+/// The rotation R of the polar decomposition F = R U (row-major 3×3), for det F > 0, by Higham's
+/// scaled Newton iteration X ← ½ (ζ X + X⁻ᵀ / ζ), ζ = (‖X⁻¹‖_F / ‖X‖_F)^½: quadratically
+/// convergent, a proper rotation for det F > 0, and cheaper than an SVD. Returns det F.
+template <typename Real>
+inline Real polar_rotation(const Real* f, Real* r)
+{
+    const auto det = [](const Real* x) {
+        return x[0] * (x[4] * x[8] - x[5] * x[7]) - x[1] * (x[3] * x[8] - x[5] * x[6]) + x[2] * (x[3] * x[7] - x[4] * x[6]);
+    };
+    const Real j = det(f);
+    for (int k = 0; k < 9; ++k) r[k] = f[k];
+    if (!(j > Real(0))) return j;
+    const Real tolerance = Real(64) * std::numeric_limits<Real>::epsilon();
+    for (int iteration = 0; iteration < 40; ++iteration) {
+        const Real d = det(r);
+        // X⁻ᵀ = cofactor(X) / det X
+        Real c[9];
+        c[0] = r[4] * r[8] - r[5] * r[7];
+        c[1] = r[5] * r[6] - r[3] * r[8];
+        c[2] = r[3] * r[7] - r[4] * r[6];
+        c[3] = r[2] * r[7] - r[1] * r[8];
+        c[4] = r[0] * r[8] - r[2] * r[6];
+        c[5] = r[1] * r[6] - r[0] * r[7];
+        c[6] = r[1] * r[5] - r[2] * r[4];
+        c[7] = r[2] * r[3] - r[0] * r[5];
+        c[8] = r[0] * r[4] - r[1] * r[3];
+        Real x_norm = 0, c_norm = 0;
+        for (int k = 0; k < 9; ++k) {
+            c[k] /= d;
+            x_norm += r[k] * r[k];
+            c_norm += c[k] * c[k];
+        }
+        const Real zeta = std::sqrt(std::sqrt(c_norm / x_norm));
+        Real change = 0;
+        for (int k = 0; k < 9; ++k) {
+            const Real next = Real(0.5) * (zeta * r[k] + c[k] / zeta);
+            change += (next - r[k]) * (next - r[k]);
+            r[k] = next;
+        }
+        if (change <= tolerance * tolerance * Real(3)) break;
+    }
+    return j;
+}
+
 /// First Piola–Kirchhoff stress P (MPa) for F (row-major 3×3), written to `p`. Returns J = det F.
 /// `volumetric_j` > 0 (Neo-Hookean only) replaces J in the pressure κ(J − 1): the averaged-nodal-
 /// pressure tetrahedron passes the volume change averaged over the element's nodes.
@@ -45,6 +96,14 @@ inline Real first_piola_kirchhoff(MaterialLaw law, Real mu, Real lambda, Real ka
 {
     const Real j = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) +
                    f[2] * (f[3] * f[7] - f[4] * f[6]);
+    if (law == MaterialLaw::corotational) {
+        Real r[9];
+        polar_rotation(f, r);
+        Real excess = -Real(3); // tr(RᵀF) − 3 = tr(U − I)
+        for (int k = 0; k < 9; ++k) excess += r[k] * f[k];
+        for (int k = 0; k < 9; ++k) p[k] = Real(2) * mu * (f[k] - r[k]) + lambda * excess * r[k];
+        return j;
+    }
     if (law == MaterialLaw::linear_elastic) {
         const Real trace = f[0] + f[4] + f[8] - Real(3);
         for (int r = 0; r < 3; ++r)
@@ -111,7 +170,8 @@ namespace physreg {
 /// Material tangent A = ∂P/∂F (MPa) at F (row-major 3×3), for implicit solvers (double precision):
 /// a[9 (3i + J) + (3k + L)] = ∂P_iJ/∂F_kL. With P = F S and ℂ = 2 ∂S/∂C,
 /// A_iJkL = δ_ik S_JL + Σ_IK F_iI ℂ_IJKL F_kK (Neo-Hookean and St Venant–Kirchhoff); the linear
-/// law's A is constant. Returns J = det F. The averaged-nodal-pressure variant has no tangent here.
+/// law's A is constant. Co-rotational: A = 2μ 𝕀 + λ R⊗R + (λ (tr(RᵀF) − 3) − 2μ) ∂R/∂F, with
+/// ∂R = R Ω, Ω = [ω]×, ω = (tr U I − U)⁻¹ axial(Rᵀ∂F − ∂FᵀR). Returns J = det F. The averaged-nodal-pressure variant has no tangent here.
 double first_piola_tangent(MaterialLaw law, const ElasticMaterial& m, const double* f, double* a);
 
 } // namespace physreg

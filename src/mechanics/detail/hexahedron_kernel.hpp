@@ -110,7 +110,7 @@ inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBa
     if (inverted >= 0) return inverted;
 
     alignas(64) Real P[9][W];
-    if (law == MaterialLaw::linear_elastic) {
+    if (law == MaterialLaw::linear_elastic || law == MaterialLaw::corotational) {
         for (int w = 0; w < W; ++w) {
             Real fl[9], pl[9];
             for (int k = 0; k < 9; ++k) fl[k] = F[k][w];

@@ -6,6 +6,8 @@
 #include "physreg/mechanics/stiffness_assembly.hpp"
 #include "physreg/mechanics/tissue_coupling.hpp"
 
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -98,7 +100,8 @@ NewtonOptions tight_newton()
 TEST(MechanicsImplicit, MaterialTangentMatchesFiniteDifferencesOfTheStress)
 {
     const ElasticMaterial m = material_from_tissue({1, "t", 2e5, 0.49, 1000});
-    for (MaterialLaw law : {MaterialLaw::neo_hookean, MaterialLaw::st_venant_kirchhoff, MaterialLaw::linear_elastic}) {
+    for (MaterialLaw law : {MaterialLaw::neo_hookean, MaterialLaw::st_venant_kirchhoff, MaterialLaw::linear_elastic,
+                            MaterialLaw::corotational}) {
         double a[81];
         first_piola_tangent(law, m, kF, a);
         double worst = 0.0, largest = 0.0;
@@ -132,7 +135,9 @@ TEST(MechanicsImplicit, AssembledTangentMatchesFiniteDifferencesOfTheForces)
                                      {"distorted hexahedra, neo-Hookean", distorted(grid, 0.2), MaterialLaw::neo_hookean},
                                      {"distorted hexahedra, SVK", distorted(grid, 0.2), MaterialLaw::st_venant_kirchhoff},
                                      {"tetrahedra, neo-Hookean", split_hexahedra_into_tetrahedra(distorted(grid, 0.2)), MaterialLaw::neo_hookean},
-                                     {"tetrahedra, linear", split_hexahedra_into_tetrahedra(grid), MaterialLaw::linear_elastic}};
+                                     {"tetrahedra, linear", split_hexahedra_into_tetrahedra(grid), MaterialLaw::linear_elastic},
+                                     {"tetrahedra, co-rotational", split_hexahedra_into_tetrahedra(distorted(grid, 0.2)), MaterialLaw::corotational},
+                                     {"distorted hexahedra, co-rotational", distorted(grid, 0.2), MaterialLaw::corotational}};
     for (const auto& c : cases) {
         TledOptions options;
         options.law = c.law;
@@ -146,6 +151,53 @@ TEST(MechanicsImplicit, AssembledTangentMatchesFiniteDifferencesOfTheForces)
         assembler.assemble(u.data(), f.data(), &k);
         const SparseMatrix kt = k.transpose();
         EXPECT_LT((k - kt).norm(), 1e-10 * k.norm()) << c.name << ": the tangent is not symmetric";
+    }
+}
+
+TEST(MechanicsImplicit, CorotationalLawIsRotationInvariantAndLinearForSmallStrains)
+{
+    const ElasticMaterial m = material_from_tissue({1, "t", 3500, 0.45, 1000});
+    // The polar rotation is a rotation and F = R U with U symmetric positive definite.
+    double r[9];
+    polar_rotation(kF, r);
+    const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> f_map(kF), r_map(r);
+    EXPECT_LT((r_map.transpose() * r_map - Mat3::Identity()).norm(), 1e-13);
+    EXPECT_NEAR(r_map.determinant(), 1.0, 1e-13);
+    const Mat3 u_stretch = r_map.transpose() * f_map;
+    EXPECT_LT((u_stretch - u_stretch.transpose()).norm(), 1e-13);
+    EXPECT_GT(Eigen::SelfAdjointEigenSolver<Mat3>(u_stretch).eigenvalues().minCoeff(), 0.0);
+    // Small strain, no rotation: the linear law to first order.
+    const double h = 1e-5;
+    double f[9], p_corot[9], p_linear[9];
+    for (int k = 0; k < 9; ++k) f[k] = (k % 4 == 0 ? 1.0 : 0.0) + h * (kF[k] - (k % 4 == 0 ? 1.0 : 0.0));
+    first_piola_kirchhoff<double>(MaterialLaw::corotational, m.mu_mpa, m.lambda_mpa, m.kappa_mpa, f, p_corot);
+    first_piola_kirchhoff<double>(MaterialLaw::linear_elastic, m.mu_mpa, m.lambda_mpa, m.kappa_mpa, f, p_linear);
+    double diff = 0, size = 0;
+    for (int k = 0; k < 9; ++k) diff = std::max(diff, std::abs(p_corot[k] - p_linear[k])), size = std::max(size, std::abs(p_linear[k]));
+    EXPECT_LT(diff, 1e-3 * size); // the difference is O(h²) against O(h)
+
+    // A rigid rotation by 90° (about an oblique axis) of a whole mesh: no elastic force and no
+    // energy, for tetrahedra and hexahedra — where the small-strain law gives forces of the order of E.
+    const Mat3 q = Eigen::AngleAxisd(M_PI / 2, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+    for (const VolumeMesh& mesh : {split_hexahedra_into_tetrahedra(distorted(block_mesh(4, 3, 3, 1.5), 0.2)),
+                                   distorted(block_mesh(4, 3, 3, 1.5), 0.2)}) {
+        double corotational_force = 0, linear_force = 0;
+        for (MaterialLaw law : {MaterialLaw::corotational, MaterialLaw::linear_elastic}) {
+            TledOptions options;
+            options.law = law;
+            const TledModel model(mesh, one_tissue(3500, 0.45), options);
+            const StiffnessAssembler assembler(model);
+            std::vector<double> u(3 * model.node_count()), force(u.size());
+            for (std::size_t i = 0; i < model.node_count(); ++i) {
+                const Vec3 x = q * mesh.nodes[i] - mesh.nodes[i];
+                for (int d = 0; d < 3; ++d) u[3 * i + d] = x[d];
+            }
+            const Assembly a = assembler.assemble(u.data(), force.data(), nullptr);
+            (law == MaterialLaw::corotational ? corotational_force : linear_force) = max_abs(force);
+            if (law == MaterialLaw::corotational) EXPECT_LT(std::abs(a.energy_mj), 1e-16);
+        }
+        EXPECT_GT(linear_force, 1e-4);
+        EXPECT_LT(corotational_force, 1e-12 * linear_force) << "co-rotational force " << corotational_force;
     }
 }
 
