@@ -123,6 +123,35 @@ SymmetricSolver::~SymmetricSolver() = default;
 SymmetricSolver::SymmetricSolver(SymmetricSolver&&) noexcept = default;
 SymmetricSolver& SymmetricSolver::operator=(SymmetricSolver&&) noexcept = default;
 
+LinearSolveStats SymmetricSolver::factorise(const SparseMatrix& k)
+{
+    LinearSolveStats stats;
+    const auto start = std::chrono::steady_clock::now();
+    stats.shift = m_impl->factorise(k);
+    stats.factorised = true;
+    stats.factorisation_s = seconds_since(start);
+    return stats;
+}
+
+LinearSolveStats SymmetricSolver::solve_factored(const Eigen::VectorXd& b, Eigen::VectorXd& x)
+{
+    if (!m_impl->factored) fail("linear solver: no factorisation to solve with");
+    if (b.size() != m_impl->pattern_rows) fail("linear solver: right-hand side of {} rows for a factor of {}", b.size(), m_impl->pattern_rows);
+    LinearSolveStats stats;
+    const auto start = std::chrono::steady_clock::now();
+    {
+        const SingleThreadedBlas one_thread;
+        x = m_impl->factor.solve(b);
+    }
+    stats.solve_s = seconds_since(start);
+    return stats;
+}
+
+bool SymmetricSolver::has_factor() const
+{
+    return m_impl->factored;
+}
+
 void SymmetricSolver::invalidate()
 {
     m_impl->factored = false;

@@ -46,6 +46,12 @@ public:
     /// Solves K x = b. K (both triangles stored) keeps its sparsity pattern between calls. Throws
     /// Error when K cannot be factored even with a shift of 1e3 × its largest diagonal entry.
     LinearSolveStats solve(const SparseMatrix& k, const Eigen::VectorXd& b, Eigen::VectorXd& x);
+    /// Factors K now (shifted if it is not positive definite), for later solve_factored calls.
+    LinearSolveStats factorise(const SparseMatrix& k);
+    /// Solves with the factor of the last factorised matrix (modified Newton: a stale tangent).
+    /// Throws Error when there is none.
+    LinearSolveStats solve_factored(const Eigen::VectorXd& b, Eigen::VectorXd& x);
+    bool has_factor() const;
     /// Forget the factor (the next pcg-factor solve refactors).
     void invalidate();
     const LinearSolverOptions& options() const { return m_options; }
