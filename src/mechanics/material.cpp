@@ -50,7 +50,7 @@ double first_piola_tangent(MaterialLaw law, const ElasticMaterial& m, const doub
     const double j = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) + f[2] * (f[3] * f[7] - f[4] * f[6]);
     if (law == MaterialLaw::corotational) {
         double r[9];
-        polar_rotation(f, r);
+        corotation(f, r);
         double u[3][3]; // U = Rᵀ F (symmetric up to round-off)
         for (int I = 0; I < 3; ++I)
             for (int J = 0; J < 3; ++J) u[I][J] = r[I] * f[J] + r[3 + I] * f[3 + J] + r[6 + I] * f[6 + J];
@@ -141,6 +141,19 @@ double first_piola_tangent(MaterialLaw law, const ElasticMaterial& m, const doub
                 for (int L = 0; L < 3; ++L)
                     a[9 * (3 * i + J) + 3 * k + L] = d(i, k) * s[J][L] + f[3 * k] * t[i][J][0][L] + f[3 * k + 1] * t[i][J][1][L] +
                                                      f[3 * k + 2] * t[i][J][2][L];
+    return j;
+}
+
+double rotated_linear_tangent(const ElasticMaterial& m, const double* f, double* a)
+{
+    double r[9];
+    const double j = corotation(f, r);
+    for (int i = 0; i < 3; ++i)
+        for (int J = 0; J < 3; ++J)
+            for (int k = 0; k < 3; ++k)
+                for (int L = 0; L < 3; ++L)
+                    a[9 * (3 * i + J) + 3 * k + L] = m.lambda_mpa * r[3 * i + J] * r[3 * k + L] +
+                                                     m.mu_mpa * ((i == k && J == L ? 1.0 : 0.0) + r[3 * i + L] * r[3 * k + J]);
     return j;
 }
 

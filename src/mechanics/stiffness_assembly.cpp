@@ -121,7 +121,7 @@ Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* 
         values = stiffness->valuePtr();
     }
     std::vector<double> element_energy(e_count, 0.0);
-    std::int64_t inverted = -1, non_finite = -1;
+    std::int64_t inverted = -1, non_finite = -1, inverted_count = 0;
     const std::int64_t nnz = static_cast<std::int64_t>(m_inner.size());
 #pragma omp parallel
     {
@@ -131,7 +131,7 @@ Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* 
 #pragma omp for schedule(static)
             for (std::int64_t k = 0; k < nnz; ++k) values[k] = 0.0;
         }
-        std::int64_t my_inverted = -1, my_non_finite = -1;
+        std::int64_t my_inverted = -1, my_non_finite = -1, my_inverted_count = 0;
         for (const auto& phase : m_model.phases()) {
             const long chunks = static_cast<long>(phase.size());
 #pragma omp for schedule(dynamic, 4)
@@ -146,16 +146,28 @@ Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* 
                         for (int i = 0; i < 3; ++i)
                             for (int J = 0; J < 3; ++J) F[3 * i + J] += u[3 * ids[a] + i] * g.dn_dx[3 * a + J];
                     double A[81], P[9];
-                    const double j = first_piola_tangent(law, mat, F, A);
+                    const bool rotated = m_rotated_tangent && law == MaterialLaw::corotational;
+                    const double j = values ? (rotated ? rotated_linear_tangent(mat, F, A) : first_piola_tangent(law, mat, F, A))
+                                            : F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) +
+                                                  F[2] * (F[3] * F[7] - F[4] * F[6]);
                     if (!(j > 0.0)) {
-                        if (my_inverted < 0 || static_cast<std::int64_t>(e) < my_inverted) my_inverted = static_cast<std::int64_t>(e);
-                        continue;
+                        if (law == MaterialLaw::corotational) {
+                            ++my_inverted_count; // the co-rotational law pushes inverted elements back (see corotation())
+                        } else {
+                            if (my_inverted < 0 || static_cast<std::int64_t>(e) < my_inverted) my_inverted = static_cast<std::int64_t>(e);
+                            continue;
+                        }
                     }
-                    first_piola_kirchhoff<double>(law, mat.mu_mpa, mat.lambda_mpa, mat.kappa_mpa, F, P);
                     const double v = g.volume_mm3;
-                    Mat3 fm;
-                    for (int k = 0; k < 9; ++k) fm(k / 3, k % 3) = F[k];
-                    double energy = v * strain_energy_density(law, mat, fm);
+                    double energy = 0.0;
+                    if (law == MaterialLaw::corotational) {
+                        energy = v * corotational_stress(mat.mu_mpa, mat.lambda_mpa, F, P);
+                    } else {
+                        first_piola_kirchhoff<double>(law, mat.mu_mpa, mat.lambda_mpa, mat.kappa_mpa, F, P);
+                        Mat3 fm;
+                        for (int k = 0; k < 9; ++k) fm(k / 3, k % 3) = F[k];
+                        energy = v * strain_energy_density(law, mat, fm);
+                    }
                     double local_f[24];
                     for (int a = 0; a < npe; ++a)
                         for (int i = 0; i < 3; ++i)
@@ -213,11 +225,13 @@ Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* 
         {
             if (my_inverted >= 0 && (inverted < 0 || my_inverted < inverted)) inverted = my_inverted;
             if (my_non_finite >= 0 && (non_finite < 0 || my_non_finite < non_finite)) non_finite = my_non_finite;
+            inverted_count += my_inverted_count;
         }
     }
     Assembly result;
     result.inverted_element = inverted;
     result.non_finite_element = non_finite;
+    result.inverted_tolerated = inverted_count;
     if (inverted >= 0) return result;
     for (double e : element_energy) result.energy_mj += e; // fixed order: the same sum for any thread count
     if (m_coupling) {

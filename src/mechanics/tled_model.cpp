@@ -153,8 +153,8 @@ double strain_energy_density(MaterialLaw law, const ElasticMaterial& m, const Ma
     const double j = f.determinant();
     if (law == MaterialLaw::corotational) {
         Mat3 r;
-        // Column-major storage reads as Fᵀ = Rᵀ (R U Rᵀ), whose polar rotation Rᵀ comes back stored as R.
-        polar_rotation(f.data(), r.data());
+        // Column-major storage reads as Fᵀ = Rᵀ (R U Rᵀ), whose rotation Rᵀ comes back stored as R.
+        corotation(f.data(), r.data());
         const double excess = (r.transpose() * f).trace() - 3.0;
         return m.mu_mpa * (f - r).squaredNorm() + 0.5 * m.lambda_mpa * excess * excess;
     }

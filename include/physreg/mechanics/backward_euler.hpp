@@ -43,6 +43,10 @@ struct BackwardEulerOptions {
     double rayleigh_stiffness_s = 0.0;  ///< β, s
     MassKind mass = MassKind::lumped;
     TangentUpdate tangent = TangentUpdate::stale;
+    /// Co-rotational law: the Jacobian's stiffness is the rotated R K₀ Rᵀ (true, as SOFA: positive
+    /// definite even with crushed or inverted elements) or the exact tangent (false: quadratic
+    /// convergence while every element is well shaped).
+    bool rotated_corotational_tangent = true;
     int max_newton_iterations = 10;     ///< per step (tolerance mode)
     /// > 0: exactly this many Newton iterations per step, no convergence test (1: linearised
     /// backward Euler). 0: iterate to residual_tolerance, an error when it is not reached.
@@ -56,9 +60,11 @@ struct BackwardEulerStep {
     bool converged = true;        ///< fixed-iteration steps: always true (the residual is reported)
     int newton_iterations = 0;
     int factorisations = 0;
+    int shifted_factorisations = 0; ///< Jacobians that were not positive definite (factored with a diagonal shift)
     double residual_n = 0.0;      ///< largest free residual at the end of the step, N
     double reference_force_n = 0.0;
     std::vector<double> residual_history; ///< N, after each force evaluation
+    std::int64_t inverted_elements = 0;   ///< co-rotational law: elements with det F ≤ 0 at the end of the step
     double force_s = 0.0, assembly_s = 0.0, factorisation_s = 0.0, solve_s = 0.0, seconds = 0.0;
 };
 
@@ -92,6 +98,7 @@ public:
 
 private:
     double evaluate_forces(const std::vector<double>& u, std::vector<double>& f, BackwardEulerStep& stats) const;
+    bool forces_if_valid(const std::vector<double>& u, std::vector<double>& f, BackwardEulerStep& stats) const;
     void factorise_jacobian(const std::vector<double>& u, BackwardEulerStep& stats);
     bool attempt(BackwardEulerStep& stats, bool fresh_tangent_every_iteration);
 

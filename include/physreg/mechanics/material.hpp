@@ -17,6 +17,9 @@
 // the small-strain law it gives zero force under any rigid rotation.
 #include "physreg/model/tissue_table.hpp"
 
+#include <Eigen/Core>
+#include <Eigen/SVD>
+
 #include <cmath>
 #include <limits>
 #include <string>
@@ -54,7 +57,9 @@ inline Real polar_rotation(const Real* f, Real* r)
     const Real j = det(f);
     for (int k = 0; k < 9; ++k) r[k] = f[k];
     if (!(j > Real(0))) return j;
-    const Real tolerance = Real(64) * std::numeric_limits<Real>::epsilon();
+    // Quadratic convergence: once an update changes X by less than δ, the error left is O(δ²), so
+    // δ ≤ 4 √ε is enough.
+    const Real tolerance = Real(4) * std::sqrt(std::numeric_limits<Real>::epsilon());
     for (int iteration = 0; iteration < 40; ++iteration) {
         const Real d = det(r);
         // X⁻ᵀ = cofactor(X) / det X
@@ -81,9 +86,44 @@ inline Real polar_rotation(const Real* f, Real* r)
             change += (next - r[k]) * (next - r[k]);
             r[k] = next;
         }
-        if (change <= tolerance * tolerance * Real(3)) break;
+        if (change <= tolerance * tolerance) break;
     }
     return j;
+}
+
+/// The rotation of the co-rotational law: the polar rotation for det F > 0; for an inverted or
+/// flat element (det F ≤ 0) the rotation of the SVD F = W Σ Vᵀ with W and V made proper by
+/// negating the smallest singular value (Irving, Teran & Fedkiw 2004), so that the linear law in
+/// the rotated frame pushes the element back out of inversion. Returns det F.
+template <typename Real>
+inline Real corotation(const Real* f, Real* r)
+{
+    const Real j = polar_rotation(f, r);
+    if (j > Real(0)) return j;
+    using Matrix = Eigen::Matrix<Real, 3, 3, Eigen::RowMajor>;
+    const Eigen::JacobiSVD<Matrix> svd(Eigen::Map<const Matrix>(f), Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Matrix w = svd.matrixU(), v = svd.matrixV();
+    if (w.determinant() < Real(0)) w.col(2) *= Real(-1);
+    if (v.determinant() < Real(0)) v.col(2) *= Real(-1);
+    Eigen::Map<Matrix> rotation(r);
+    rotation = w * v.transpose();
+    return j;
+}
+
+/// The co-rotational law's P (MPa, written to `p`) at F; returns the energy density Ψ (MPa), both
+/// from one rotation.
+template <typename Real>
+inline Real corotational_stress(Real mu, Real lambda, const Real* f, Real* p)
+{
+    Real r[9];
+    corotation(f, r);
+    Real excess = -Real(3), distance = 0; // tr(RᵀF) − 3 = tr(U − I), |F − R|²
+    for (int k = 0; k < 9; ++k) {
+        excess += r[k] * f[k];
+        distance += (f[k] - r[k]) * (f[k] - r[k]);
+    }
+    for (int k = 0; k < 9; ++k) p[k] = Real(2) * mu * (f[k] - r[k]) + lambda * excess * r[k];
+    return mu * distance + Real(0.5) * lambda * excess * excess;
 }
 
 /// First Piola–Kirchhoff stress P (MPa) for F (row-major 3×3), written to `p`. Returns J = det F.
@@ -97,11 +137,7 @@ inline Real first_piola_kirchhoff(MaterialLaw law, Real mu, Real lambda, Real ka
     const Real j = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) +
                    f[2] * (f[3] * f[7] - f[4] * f[6]);
     if (law == MaterialLaw::corotational) {
-        Real r[9];
-        polar_rotation(f, r);
-        Real excess = -Real(3); // tr(RᵀF) − 3 = tr(U − I)
-        for (int k = 0; k < 9; ++k) excess += r[k] * f[k];
-        for (int k = 0; k < 9; ++k) p[k] = Real(2) * mu * (f[k] - r[k]) + lambda * excess * r[k];
+        corotational_stress(mu, lambda, f, p);
         return j;
     }
     if (law == MaterialLaw::linear_elastic) {
@@ -173,5 +209,12 @@ namespace physreg {
 /// law's A is constant. Co-rotational: A = 2μ 𝕀 + λ R⊗R + (λ (tr(RᵀF) − 3) − 2μ) ∂R/∂F, with
 /// ∂R = R Ω, Ω = [ω]×, ω = (tr U I − U)⁻¹ axial(Rᵀ∂F − ∂FᵀR). Returns J = det F. The averaged-nodal-pressure variant has no tangent here.
 double first_piola_tangent(MaterialLaw law, const ElasticMaterial& m, const double* f, double* a);
+
+/// The classical co-rotational stiffness (SOFA, Müller & Gross): the small-strain tangent rotated,
+/// A_iJkL = λ R_iJ R_kL + μ (δ_ik δ_JL + R_iL R_kJ), i.e. K_e = R K₀ Rᵀ. It drops ∂R/∂F, so it is not
+/// the exact derivative of the force, but it is positive semi-definite for every F (inverted
+/// elements included): Newton becomes a quasi-Newton method that cannot be thrown off by the
+/// indefinite exact tangent of a crushed element. Returns J = det F.
+double rotated_linear_tangent(const ElasticMaterial& m, const double* f, double* a);
 
 } // namespace physreg

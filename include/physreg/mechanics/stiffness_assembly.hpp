@@ -28,6 +28,9 @@ struct Assembly {
     double energy_mj = 0.0;          ///< strain + hourglass + coupling energy, mJ (N·mm)
     std::int64_t inverted_element = -1; ///< an element with det F ≤ 0 (then nothing else is valid)
     std::int64_t non_finite_element = -1; ///< an element whose force or tangent is NaN/inf
+    /// Co-rotational law: elements with det F ≤ 0, kept in the solve (their rotation comes from
+    /// the SVD and their force pushes them back); other laws stop at the first inverted element.
+    std::int64_t inverted_tolerated = 0;
 };
 
 class StiffnessAssembler {
@@ -41,6 +44,11 @@ public:
     Assembly assemble(const double* u, double* f, SparseMatrix* stiffness) const;
     /// Energy only (line searches). inverted_element ≥ 0 when some element is inverted.
     Assembly energy(const double* u) const;
+
+    /// Co-rotational law only: assemble the rotated small-strain stiffness R K₀ Rᵀ (always positive
+    /// semi-definite, not the exact derivative) instead of the exact tangent.
+    void set_rotated_corotational_tangent(bool rotated) { m_rotated_tangent = rotated; }
+    bool rotated_corotational_tangent() const { return m_rotated_tangent; }
 
     /// A matrix with the pattern, values zero.
     SparseMatrix make_matrix() const;
@@ -59,6 +67,7 @@ private:
     std::vector<std::int32_t> m_block;         ///< per element, per (a, b): position of node a in b's neighbours
     std::vector<std::int64_t> m_coupling_index, m_coupling_begin; ///< coupling pairs' value offsets, per point
     std::vector<std::vector<double>> m_hourglass_gram; ///< per geometry: Σ_α Γ_aα Γ_bα (8×8)
+    bool m_rotated_tangent = false;
     std::vector<double> m_hourglass_k;         ///< per material: κ_hg M / 8 (times V Σ|b|² per geometry)
 };
 
