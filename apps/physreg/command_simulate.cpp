@@ -100,6 +100,25 @@ nlohmann::json write_simulation_outputs(const SimulationCase& c, const Simulatio
                           {"max_penetration_mm", s.max_penetration_mm},
                           {"time_s", {{"assembly", s.assembly_s}, {"factorisation", s.factorisation_s}, {"solve", s.solve_s},
                                       {"contact", s.contact_s}, {"line_search", s.line_search_s}, {"total", s.seconds}}}});
+    nlohmann::json backward_euler = nullptr;
+    if (result.backward_euler) {
+        const auto& t = *result.backward_euler;
+        backward_euler = {{"time_step_s", c.backward_euler.time_step_s},
+                          {"rayleigh_mass_per_s", c.backward_euler.rayleigh_mass_per_s},
+                          {"rayleigh_stiffness_s", c.backward_euler.rayleigh_stiffness_s},
+                          {"mass", to_string(c.backward_euler.mass)},
+                          {"tangent", to_string(c.backward_euler.tangent)},
+                          {"newton_iterations_per_step", c.backward_euler.fixed_newton_iterations > 0
+                                                             ? nlohmann::json(c.backward_euler.fixed_newton_iterations)
+                                                             : nlohmann::json("to tolerance")},
+                          {"tolerance", c.backward_euler.residual_tolerance},
+                          {"newton_iterations", t.newton_iterations},
+                          {"factorisations", t.factorisations},
+                          {"shifted_factorisations", t.shifted_factorisations},
+                          {"worst_relative_residual", t.worst_relative_residual},
+                          {"most_inverted_elements", t.most_inverted_elements},
+                          {"time_s", {{"forces", t.force_s}, {"assembly", t.assembly_s}, {"factorisation", t.factorisation_s}, {"solve", t.solve_s}}}};
+    }
     nlohmann::json summary = {{"case", c.source.string()},
                               {"method", to_string(c.method)},
                               {"mode", c.dynamic ? "dynamic" : "static"},
@@ -111,6 +130,7 @@ nlohmann::json write_simulation_outputs(const SimulationCase& c, const Simulatio
                               {"steps", result.steps},
                               {"equilibria", equilibria},
                               {"newton", newton},
+                              {"backward_euler", backward_euler},
                               {"max_displacement_mm", largest},
                               {"seconds", result.seconds},
                               {"outputs", {"frames.pvd", "final.vtu", "displacement_field.nii.gz", "displacement_mask.nii.gz"}}};

@@ -104,7 +104,9 @@ SimulationCase read_simulation_case(const fs::path& path)
         fail("{}: not valid YAML: {}", r.what, e.what());
     }
     if (!root.IsMap()) fail("{}: expected a map", r.what);
-    r.check_keys(root, {"mesh", "labels", "grid", "tissues", "element", "material_law", "solver", "constraints", "forces", "indenters", "output"},
+    r.check_keys(root,
+                 {"mesh", "labels", "grid", "tissues", "element", "material_law", "solver", "constraints", "forces", "indenters",
+                  "gravity_mm_s2", "output"},
                  "the case");
     SimulationCase c;
     c.source = path;
@@ -119,6 +121,7 @@ SimulationCase read_simulation_case(const fs::path& path)
         c.tetrahedra = e == "tetrahedron";
     }
     if (root["material_law"]) c.tled.law = parse_material_law(r.get<std::string>(root["material_law"], "material_law", "the case"));
+    if (root["gravity_mm_s2"]) c.gravity_mm_s2 = r.vec3(root["gravity_mm_s2"], "gravity_mm_s2", "the case");
 
     const YAML::Node solver = root["solver"];
     if (solver) {
@@ -127,7 +130,8 @@ SimulationCase read_simulation_case(const fs::path& path)
                      {"method", "mode", "precision", "duration_s", "ramp_time_s", "damping_per_s", "hourglass_kappa", "hourglass_modulus",
                       "averaged_nodal_pressure", "time_step_safety", "density_scale", "time_step_s", "load_steps",
                       "displacement_tolerance_mm", "residual_tolerance", "max_iterations", "linear", "tolerance",
-                      "penetration_tolerance_mm", "max_load_cuts"},
+                      "penetration_tolerance_mm", "max_load_cuts", "rayleigh_mass_per_s", "rayleigh_stiffness_s", "mass", "tangent",
+                      "newton_iterations", "corotational_tangent"},
                      where);
         if (solver["mode"]) {
             const auto mode = r.get<std::string>(solver["mode"], "mode", where);
@@ -140,16 +144,43 @@ SimulationCase read_simulation_case(const fs::path& path)
             if (method == "relaxation") m = SimulationCase::Method::relaxation;
             else if (method == "newton") m = SimulationCase::Method::newton;
             else if (method == "explicit") m = SimulationCase::Method::explicit_dynamics;
-            else if (method == "backward-euler")
-                fail("{}: solver.method 'backward-euler' is not available yet (static: newton or relaxation; dynamics: explicit)", r.what);
-            else fail("{}: solver.method '{}' must be relaxation, newton or explicit", r.what, method);
+            else if (method == "backward-euler") m = SimulationCase::Method::backward_euler;
+            else fail("{}: solver.method '{}' must be relaxation, newton, explicit or backward-euler", r.what, method);
             if (solver["mode"] && m != c.method) fail("{}: solver.mode and solver.method disagree", r.what);
             c.method = m;
         }
-        c.dynamic = c.method == SimulationCase::Method::explicit_dynamics;
+        const bool implicit_dynamics = c.method == SimulationCase::Method::backward_euler;
+        c.dynamic = c.method == SimulationCase::Method::explicit_dynamics || implicit_dynamics;
         const bool newton = c.method == SimulationCase::Method::newton;
-        for (const char* key : {"linear", "tolerance", "penetration_tolerance_mm", "max_load_cuts"})
+        for (const char* key : {"linear", "penetration_tolerance_mm", "max_load_cuts"})
             if (solver[key] && !newton) fail("{}: solver.{} applies to method: newton only", r.what, key);
+        if (solver["tolerance"] && !newton && !implicit_dynamics)
+            fail("{}: solver.tolerance applies to methods newton and backward-euler", r.what);
+        for (const char* key : {"rayleigh_mass_per_s", "rayleigh_stiffness_s", "mass", "tangent", "newton_iterations", "corotational_tangent"})
+            if (solver[key] && !implicit_dynamics) fail("{}: solver.{} applies to method: backward-euler only", r.what, key);
+        for (const char* key : {"damping_per_s", "density_scale", "time_step_safety", "precision", "load_steps"})
+            if (solver[key] && implicit_dynamics)
+                fail("{}: solver.{} does not apply to method: backward-euler (it takes time_step_s, rayleigh_mass_per_s, "
+                     "rayleigh_stiffness_s)",
+                     r.what, key);
+        if (implicit_dynamics) {
+            BackwardEulerOptions& be = c.backward_euler;
+            if (!solver["time_step_s"]) fail("{}: method backward-euler needs solver.time_step_s", r.what);
+            be.time_step_s = r.number(solver, "time_step_s", where);
+            be.rayleigh_mass_per_s = r.number(solver, "rayleigh_mass_per_s", where, 0.0);
+            be.rayleigh_stiffness_s = r.number(solver, "rayleigh_stiffness_s", where, 0.0);
+            if (solver["mass"]) be.mass = parse_mass_kind(r.get<std::string>(solver["mass"], "mass", where));
+            if (solver["tangent"]) be.tangent = parse_tangent_update(r.get<std::string>(solver["tangent"], "tangent", where));
+            if (solver["corotational_tangent"]) {
+                const auto t = r.get<std::string>(solver["corotational_tangent"], "corotational_tangent", where);
+                if (t != "rotated" && t != "exact") fail("{}: solver.corotational_tangent '{}' must be rotated or exact", r.what, t);
+                be.rotated_corotational_tangent = t == "rotated";
+            }
+            be.fixed_newton_iterations = static_cast<int>(r.number(solver, "newton_iterations", where, 0.0));
+            be.residual_tolerance = r.number(solver, "tolerance", where, be.residual_tolerance);
+            be.max_newton_iterations = static_cast<int>(r.number(solver, "max_iterations", where, be.max_newton_iterations));
+            be.validate();
+        }
         for (const char* key : {"displacement_tolerance_mm", "residual_tolerance"})
             if (solver[key] && newton) fail("{}: solver.{} applies to method: relaxation (newton takes 'tolerance')", r.what, key);
         if (newton) {
@@ -182,7 +213,7 @@ SimulationCase read_simulation_case(const fs::path& path)
         c.load_steps = static_cast<int>(r.number(solver, "load_steps", where, 1));
         c.equilibrium.displacement_tolerance_mm = r.number(solver, "displacement_tolerance_mm", where, c.equilibrium.displacement_tolerance_mm);
         c.equilibrium.residual_tolerance = r.number(solver, "residual_tolerance", where, c.equilibrium.residual_tolerance);
-        if (!newton)
+        if (!newton && !implicit_dynamics)
             c.equilibrium.max_iterations = static_cast<long>(r.number(solver, "max_iterations", where, double(c.equilibrium.max_iterations)));
     }
     if (c.method == SimulationCase::Method::newton && c.single_precision)
@@ -192,6 +223,8 @@ SimulationCase read_simulation_case(const fs::path& path)
     if (c.dynamic && !(c.duration_s > 0)) fail("{}: a dynamic run needs solver.duration_s > 0", r.what);
     if (c.load_steps < 1) fail("{}: solver.load_steps must be ≥ 1", r.what);
     if (c.time_step_s && !(*c.time_step_s > 0)) fail("{}: solver.time_step_s must be > 0", r.what);
+    if (c.method == SimulationCase::Method::backward_euler) c.time_step_s.reset(); // not the explicit step
+    if (!c.gravity_mm_s2.allFinite()) fail("{}: gravity_mm_s2 is not finite", r.what);
 
     std::size_t index = 0;
     for (const auto& node : root["constraints"]) {
@@ -240,7 +273,7 @@ SimulationCase read_simulation_case(const fs::path& path)
         i.validate();
         c.indenters.push_back(i);
     }
-    if (c.constraints.empty() && c.indenters.empty() && c.forces.empty()) fail("{}: no constraints, forces or indenters: nothing to simulate", r.what);
+    if (c.constraints.empty() && c.indenters.empty() && c.forces.empty() && c.gravity_mm_s2.isZero()) fail("{}: no constraints, forces or indenters: nothing to simulate", r.what);
 
     const YAML::Node output = root["output"];
     if (!output || !output["directory"]) fail("{}: needs output.directory", r.what);
@@ -259,6 +292,42 @@ template <typename Real>
 void run(const SimulationCase& c, const TledModel& model, const Loads& loads, SimulationResult& result,
          const std::function<void(double, const std::string&)>& progress)
 {
+    if (c.method == SimulationCase::Method::backward_euler) {
+        BackwardEuler integrator(model, c.backward_euler);
+        integrator.set_loads(loads);
+        SimulationResult::BackwardEulerTotals totals;
+        const double dt = c.backward_euler.time_step_s;
+        const long steps = std::lround(std::ceil(c.duration_s / dt - 1e-9));
+        long frame = 1;
+        for (long step = 1; step <= steps; ++step) {
+            const BackwardEulerStep s = integrator.step();
+            totals.newton_iterations += s.newton_iterations;
+            totals.factorisations += s.factorisations;
+            totals.shifted_factorisations += s.shifted_factorisations;
+            totals.worst_relative_residual = std::max(totals.worst_relative_residual, s.residual_n / std::max(s.reference_force_n, 1e-300));
+            totals.most_inverted_elements = std::max(totals.most_inverted_elements, s.inverted_elements);
+            totals.force_s += s.force_s;
+            totals.assembly_s += s.assembly_s;
+            totals.factorisation_s += s.factorisation_s;
+            totals.solve_s += s.solve_s;
+            if (progress && (step % 10 == 0 || step == steps))
+                progress(double(step) / steps, fmt::format("step {}/{}, t = {:.4g} s, {} Newton iteration(s)", step, steps, integrator.time_s(),
+                                                           s.newton_iterations));
+            // Frames evenly in time: frame k at the first step reaching k/frames of the duration.
+            while (frame <= c.frames && step * c.frames >= frame * steps) {
+                result.frames.push_back({integrator.time_s(), loads.load_factor(integrator.time_s()), integrator.displacement_mm()});
+                ++frame;
+            }
+        }
+        if (totals.most_inverted_elements > 0)
+            logger()->warn("backward Euler: up to {} co-rotational element(s) were inverted during the run (kept, pushed back by "
+                           "the law)",
+                           totals.most_inverted_elements);
+        result.backward_euler = totals;
+        result.steps = steps;
+        result.time_step_s = dt;
+        return;
+    }
     TledSolver<Real> solver(model);
     solver.set_loads(loads);
     if (c.dynamic) {
@@ -309,6 +378,7 @@ std::string to_string(SimulationCase::Method method)
     switch (method) {
     case SimulationCase::Method::newton: return "newton";
     case SimulationCase::Method::explicit_dynamics: return "explicit";
+    case SimulationCase::Method::backward_euler: return "backward-euler";
     default: return "relaxation";
     }
 }
@@ -342,6 +412,7 @@ SimulationResult run_simulation(const SimulationCase& c, const std::function<voi
     }
     const TledModel model(result.mesh, tissues, options);
     result.time_step_s = model.time_step_s();
+    if (c.method == SimulationCase::Method::backward_euler) result.time_step_s = c.backward_euler.time_step_s;
     Loads loads;
     loads.ramp_time_s = c.ramp_time_s;
     for (const auto& k : c.constraints)
@@ -351,6 +422,13 @@ SimulationResult run_simulation(const SimulationCase& c, const std::function<voi
         const auto nodes = select_nodes(result.mesh, f.select, "force '" + f.name + "'");
         for (auto n : nodes)
             for (int d = 0; d < 3; ++d) loads.external_forces_n[3 * n + d] += f.total_force_n[d] / double(nodes.size());
+    }
+    if (!c.gravity_mm_s2.isZero()) {
+        // Weight from the physical mass (the lumped mass divided by any explicit mass scaling).
+        if (loads.external_forces_n.empty()) loads.external_forces_n.assign(3 * result.mesh.node_count(), 0.0);
+        for (std::size_t n = 0; n < result.mesh.node_count(); ++n)
+            for (int d = 0; d < 3; ++d)
+                loads.external_forces_n[3 * n + d] += model.lumped_mass()[n] / options.density_scale * c.gravity_mm_s2[d];
     }
     loads.indenters = c.indenters;
     logger()->info("model: {} nodes, {} {}, {} material(s); critical time step {:.4g} s", model.node_count(),

@@ -134,6 +134,11 @@ sed 's/mode: static, load_steps: 2/method: newton, load_steps: 2, linear: cholmo
 expect_ok "simulate newton" "$physreg" simulate "$work/newton.yaml" --json
 grep -q '"method": "newton"' "$work/newton/summary.json" && pass || failed "summary names the method"
 grep -q '"newton_iterations"' "$work/newton/summary.json" && pass || failed "summary reports Newton iterations"
+# The push as implicit dynamics (backward Euler, co-rotational law), prescribed motion ramped in.
+sed 's/mode: static, load_steps: 2/method: backward-euler, time_step_s: 0.02, duration_s: 0.2, ramp_time_s: 0.1, rayleigh_mass_per_s: 5/; s/directory: sim/directory: be/' "$work/push.yaml" | sed '1i material_law: corotational' > "$work/be.yaml"
+expect_ok "simulate backward-euler" "$physreg" simulate "$work/be.yaml"
+grep -q '"method": "backward-euler"' "$work/be/summary.json" && pass || failed "summary names backward-euler"
+grep -q '"factorisations"' "$work/be/summary.json" && pass || failed "summary reports the backward Euler details"
 # Unknown or misplaced keys are errors naming the key, the file and the accepted keys.
 { cat "$work/push.yaml"; echo "bogus_key: 1"; } | sed 's/directory: sim/directory: bad5/' > "$work/bad5.yaml"
 expect_error "simulate: unknown key" "unknown key 'bogus_key'" "$physreg" simulate "$work/bad5.yaml"

@@ -2,6 +2,7 @@
 // A simulation case (what `physreg simulate CASE.yaml` runs): the model, loads, solver settings
 // and outputs, read from YAML; and the run itself.
 #include "physreg/image/image_geometry.hpp"
+#include "physreg/mechanics/backward_euler.hpp"
 #include "physreg/mechanics/newton_solver.hpp"
 #include "physreg/mechanics/node_selection.hpp"
 #include "physreg/mechanics/tled_solver.hpp"
@@ -24,12 +25,14 @@ struct SimulationCase {
     std::optional<double> time_step_s;   ///< explicit step; refused above the critical step
     bool single_precision = false;
     /// How the case is solved: static equilibrium by dynamic relaxation or by Newton's method, or
-    /// explicit dynamics for duration_s (`solver.method`; the older `solver.mode` static/dynamic
-    /// means relaxation/explicit).
-    enum class Method { relaxation, newton, explicit_dynamics };
+    /// dynamics for duration_s, explicit (central differences) or implicit (backward Euler)
+    /// (`solver.method`; the older `solver.mode` static/dynamic means relaxation/explicit).
+    enum class Method { relaxation, newton, explicit_dynamics, backward_euler };
     Method method = Method::relaxation;
-    bool dynamic = false;                ///< method == explicit_dynamics
+    bool dynamic = false;                ///< explicit_dynamics or backward_euler
     NewtonOptions newton;
+    BackwardEulerOptions backward_euler; ///< its time_step_s is solver.time_step_s
+    Vec3 gravity_mm_s2 = Vec3::Zero();   ///< body acceleration: nodal forces lumped mass × g (× load factor)
     double duration_s = 0.0;
     int load_steps = 1;                  ///< static: equilibria at 1/n, 2/n, …, 1 of the load
     EquilibriumOptions equilibrium;
@@ -70,6 +73,13 @@ struct SimulationResult {
     std::vector<SimulationFrame> frames;   ///< the last is the final state
     std::vector<SolveSummary> equilibria;  ///< relaxation: one per load step
     std::vector<NewtonSummary> newton_solves; ///< newton: one per load step
+    struct BackwardEulerTotals {
+        long newton_iterations = 0, factorisations = 0, shifted_factorisations = 0, unconverged_fixed_steps = 0;
+        double worst_relative_residual = 0.0;  ///< largest ‖r‖∞ / reference force at the end of a step
+        std::int64_t most_inverted_elements = 0; ///< co-rotational law: elements with det F ≤ 0 in one step
+        double force_s = 0, assembly_s = 0, factorisation_s = 0, solve_s = 0;
+    };
+    std::optional<BackwardEulerTotals> backward_euler;
     double critical_time_step_s = 0.0;
     double time_step_s = 0.0;
     long steps = 0;

@@ -45,6 +45,47 @@ TEST(MechanicsSimulationCase, ReadsAndRunsACase)
     for (auto n : top) EXPECT_NEAR(r.frames.back().displacement_mm[3 * n + 2], -1.0, 1e-12);
 }
 
+TEST(MechanicsSimulationCase, BackwardEulerSettlesOnTheStaticEquilibriumUnderGravity)
+{
+    // A co-rotational block on a fixed base under gravity: backward Euler with Rayleigh damping,
+    // run long enough, comes to rest on the equilibrium that Newton finds directly.
+    test::TempDir dir;
+    write_volume_mesh(dir / "block.vtu", split_hexahedra_into_tetrahedra(test::block_mesh(4, 4, 4, 2.0)));
+    std::ofstream(dir / "tissues.yaml") << "tissues: [{label: 1, name: t, young_modulus_pa: 3000, poisson_ratio: 0.45}]\n";
+    const std::string common = R"(mesh: block.vtu
+tissues: tissues.yaml
+material_law: corotational
+gravity_mm_s2: [0, -9810, 0]
+constraints:
+  - {name: base, select: {face: z_min}, fixed: [x, y, z]}
+)";
+    std::ofstream(dir / "static.yaml") << common << "solver: {method: newton}\noutput: {directory: static}\n";
+    std::ofstream(dir / "dynamic.yaml") << common
+                                        << "solver: {method: backward-euler, time_step_s: 0.01, duration_s: 1.5, rayleigh_mass_per_s: 20,\n"
+                                           "         rayleigh_stiffness_s: 0.001, mass: consistent}\noutput: {directory: dynamic, frames: 3}\n";
+    const SimulationCase dynamic_case = read_simulation_case(dir / "dynamic.yaml");
+    EXPECT_TRUE(dynamic_case.dynamic);
+    EXPECT_EQ(to_string(dynamic_case.method), "backward-euler");
+    const auto statics = run_simulation(read_simulation_case(dir / "static.yaml"), {});
+    const auto dynamics = run_simulation(dynamic_case, {});
+    ASSERT_EQ(dynamics.frames.size(), 3u);
+    EXPECT_NEAR(dynamics.frames.back().time_s, 1.5, 1e-9);
+    ASSERT_TRUE(dynamics.backward_euler.has_value());
+    EXPECT_EQ(dynamics.steps, 150);
+    const auto& a = statics.frames.back().displacement_mm;
+    const auto& b = dynamics.frames.back().displacement_mm;
+    double peak = 0, diff = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) peak = std::max(peak, std::abs(a[i])), diff = std::max(diff, std::abs(a[i] - b[i]));
+    EXPECT_GT(peak, 0.05); // it does sag (mm)
+    EXPECT_LT(diff, 1e-3 * peak) << "static peak " << peak << " mm";
+    // An indenter is refused by the implicit dynamics, with its name.
+    std::ofstream(dir / "tool.yaml") << common
+                                     << "solver: {method: backward-euler, time_step_s: 0.01, duration_s: 0.1}\n"
+                                        "indenters: [{name: probe, shape: sphere, radius_mm: 1, path_mm: [[4, 4, 9]]}]\n"
+                                        "output: {directory: tool}\n";
+    EXPECT_NE(error_of([&] { run_simulation(read_simulation_case(dir / "tool.yaml"), {}); }).find("'probe'"), std::string::npos);
+}
+
 TEST(MechanicsSimulationCase, BadCasesNameTheKeyAndReason)
 {
     test::TempDir dir;
@@ -74,7 +115,16 @@ TEST(MechanicsSimulationCase, BadCasesNameTheKeyAndReason)
               std::string::npos);
     EXPECT_NE(error_of([&] { read_simulation_case(with("mesh: block.vtu", "mesh: block.vtu\nmethod: newton")); }).find("unknown key 'method' in the case"),
               std::string::npos);
-    EXPECT_NE(error_of([&] { read_simulation_case(with("mode: static", "method: backward-euler")); }).find("not available yet"), std::string::npos);
+    EXPECT_NE(error_of([&] { read_simulation_case(with("mode: static, load_steps: 2", "method: backward-euler, duration_s: 1")); })
+                  .find("needs solver.time_step_s"),
+              std::string::npos);
+    EXPECT_NE(error_of([&] { read_simulation_case(with("mode: static", "method: newton, rayleigh_mass_per_s: 1")); })
+                  .find("applies to method: backward-euler only"),
+              std::string::npos);
+    EXPECT_NE(error_of([&] {
+                  read_simulation_case(with("mode: static, load_steps: 2", "method: backward-euler, duration_s: 1, time_step_s: 0.01, tangent: sometimes"));
+              }).find("sometimes"),
+              std::string::npos);
     EXPECT_NE(error_of([&] { read_simulation_case(with("mode: static", "mode: dynamic, method: newton")); }).find("disagree"), std::string::npos);
     // Newton runs the same case to the same answer as relaxation.
     {
