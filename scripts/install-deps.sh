@@ -17,6 +17,7 @@ packages=(
   libopenmpi-dev openmpi-bin # enrichment database builds across processes (mpirun)
   zlib1g-dev               # compressed VTU arrays
   libgtest-dev libgmock-dev libbenchmark-dev
+  calculix-ccx             # tests: an independent nonlinear FE solver to compare Newton with (optional at run time)
 )
 missing=()
 for p in "${packages[@]}"; do
