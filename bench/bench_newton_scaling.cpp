@@ -19,6 +19,7 @@
 #include <fstream>
 #include <iostream>
 #include <map>
+#include <sstream>
 
 using namespace physreg;
 
@@ -131,7 +132,7 @@ double slope(const std::vector<std::pair<double, double>>& points)
 int main(int argc, char** argv)
 {
     if (argc < 2) {
-        std::cerr << "usage: bench_newton_scaling OUT.json [--max-elements N] [--budget-s S]\n";
+        std::cerr << "usage: bench_newton_scaling OUT.json [--max-elements N] [--budget-s S] [--methods a,b,...]\n";
         return 1;
     }
     const std::string out = argv[1];
@@ -145,13 +146,20 @@ int main(int argc, char** argv)
         }
         if (a == "--max-elements") max_elements = std::stol(argv[++i]);
         else if (a == "--budget-s") budget_s = std::stod(argv[++i]);
+        else if (a == "--methods") ++i;
         else {
             std::cerr << "bench_newton_scaling: unknown option " << a << "\n";
             return 1;
         }
     }
     const std::vector<int> sizes = {28, 34, 46, 74, 126}; // n × n × n/2 cells: 11 k, 20 k, 49 k, 203 k, 1.0 M
-    const std::vector<std::string> methods = {"newton-cholmod", "newton-pcg-factor", "relaxation"};
+    std::vector<std::string> methods = {"newton-cholmod", "newton-pcg-factor", "newton-pcg-amg", "relaxation"};
+    for (int i = 2; i < argc; ++i)
+        if (std::string(argv[i]) == "--methods" && i + 1 < argc) { // comma-separated subset
+            methods.clear();
+            std::stringstream list(argv[++i]);
+            for (std::string m; std::getline(list, m, ',');) methods.push_back(m);
+        }
     nlohmann::json rows = nlohmann::json::array();
     std::map<std::string, std::vector<std::pair<double, double>>> measured;
     for (int n : sizes) {
@@ -180,8 +188,10 @@ int main(int argc, char** argv)
             Run r;
             try {
                 r = method == "relaxation" ? run_relaxation(model, loads)
-                                           : run_newton(model, loads, method == "newton-cholmod" ? LinearSolverKind::cholmod
-                                                                                                 : LinearSolverKind::pcg_factor);
+                                           : run_newton(model, loads,
+                                                        method == "newton-cholmod"  ? LinearSolverKind::cholmod
+                                                        : method == "newton-pcg-amg" ? LinearSolverKind::pcg_amg
+                                                                                     : LinearSolverKind::pcg_factor);
             } catch (const std::exception& e) {
                 r.ok = false;
                 r.note = e.what();
@@ -215,7 +225,7 @@ int main(int argc, char** argv)
     }
     canvas.text(250, 400, "ELEMENTS (LOG)", {0, 0, 0});
     canvas.text(80, 8, "TIME PER TOOL UPDATE, 2 THREADS", {0, 0, 0});
-    const std::map<std::string, Rgb> colours = {{"newton-cholmod", {200, 30, 30}}, {"newton-pcg-factor", {30, 120, 200}}, {"relaxation", {40, 150, 40}}};
+    const std::map<std::string, Rgb> colours = {{"newton-cholmod", {200, 30, 30}}, {"newton-pcg-factor", {30, 120, 200}}, {"newton-pcg-amg", {200, 120, 20}}, {"relaxation", {40, 150, 40}}};
     int legend = 0;
     for (const auto& [method, points] : measured) {
         const Rgb c = colours.at(method);

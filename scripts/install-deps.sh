@@ -7,6 +7,7 @@ packages=(
   libinsighttoolkit5-dev   # ITK 5.2: medical image IO (NIfTI, NRRD, MetaImage, DICOM)
   libeigen3-dev            # Eigen 3.4: linear algebra
   libsuitesparse-dev       # CHOLMOD supernodal Cholesky: implicit (Newton) solves
+  libhypre-dev             # hypre BoomerAMG: algebraic multigrid preconditioner (linear: pcg-amg)
   libopenblas0-openmp      # optimised BLAS/LAPACK behind CHOLMOD (replaces the reference BLAS via alternatives)
   libcli11-dev             # command line
   nlohmann-json3-dev       # JSON summaries, Slicer markups

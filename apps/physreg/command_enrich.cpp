@@ -35,7 +35,9 @@ public:
     MpiSession()
     {
         if (!std::getenv("OMPI_COMM_WORLD_SIZE") && !std::getenv("PMI_SIZE")) return;
-        int provided = 0;
+        int provided = 0, initialised = 0;
+        MPI_Initialized(&initialised);
+        if (initialised) fail("MPI was started before the enrichment session");
         MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
         m_active = true;
         MPI_Comm_rank(MPI_COMM_WORLD, &m_rank);

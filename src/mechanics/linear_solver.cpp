@@ -1,5 +1,7 @@
 #include "physreg/mechanics/linear_solver.hpp"
 
+#include "detail/amg_pcg.hpp"
+
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 
@@ -33,7 +35,8 @@ LinearSolverKind parse_linear_solver(const std::string& text)
     if (text == "auto") return LinearSolverKind::automatic;
     if (text == "cholmod") return LinearSolverKind::cholmod;
     if (text == "pcg-factor") return LinearSolverKind::pcg_factor;
-    fail("linear solver '{}' is not one of auto, cholmod, pcg-factor", text);
+    if (text == "pcg-amg") return LinearSolverKind::pcg_amg;
+    fail("linear solver '{}' is not one of auto, cholmod, pcg-factor, pcg-amg", text);
 }
 
 std::string to_string(LinearSolverKind kind)
@@ -41,6 +44,7 @@ std::string to_string(LinearSolverKind kind)
     switch (kind) {
     case LinearSolverKind::automatic: return "auto";
     case LinearSolverKind::cholmod: return "cholmod";
+    case LinearSolverKind::pcg_amg: return "pcg-amg";
     default: return "pcg-factor";
     }
 }
@@ -50,6 +54,7 @@ void LinearSolverOptions::validate() const
     if (!(pcg_relative_tolerance > 0 && pcg_relative_tolerance < 1))
         fail("linear solver: pcg tolerance {} must be in (0, 1)", pcg_relative_tolerance);
     if (refactor_iterations < 1) fail("linear solver: refactor_iterations {} must be ≥ 1", refactor_iterations);
+    if (amg_max_iterations < 1) fail("linear solver: amg_max_iterations {} must be ≥ 1", amg_max_iterations);
 }
 
 void symmetric_product(const SparseMatrix& k, const Eigen::VectorXd& x, Eigen::VectorXd& y)
@@ -71,6 +76,7 @@ struct SymmetricSolver::Impl {
     Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> factor;
     bool analysed = false, factored = false;
     Eigen::Index pattern_nnz = -1, pattern_rows = -1;
+    std::vector<double> coordinates; ///< pcg-amg: node positions for the rigid rotations
 
     Impl()
     {
@@ -152,6 +158,11 @@ bool SymmetricSolver::has_factor() const
     return m_impl->factored;
 }
 
+void SymmetricSolver::set_node_coordinates(std::vector<double> xyz)
+{
+    m_impl->coordinates = std::move(xyz);
+}
+
 void SymmetricSolver::invalidate()
 {
     m_impl->factored = false;
@@ -173,6 +184,19 @@ LinearSolveStats SymmetricSolver::solve(const SparseMatrix& k, const Eigen::Vect
         }
         stats.solve_s += seconds_since(start);
     };
+    if (m_options.kind == LinearSolverKind::pcg_amg) {
+        const detail::AmgPcgResult amg =
+            detail::solve_amg_pcg(k, b, x, s.coordinates, m_options.pcg_relative_tolerance, m_options.amg_max_iterations);
+        stats.iterations = amg.iterations;
+        stats.factorised = true; // the AMG setup plays the factorisation's part
+        stats.factorisation_s = amg.setup_s;
+        stats.solve_s = amg.solve_s;
+        if (!amg.converged)
+            fail("linear solver pcg-amg: CG with BoomerAMG reached a relative residual of {:.3g} after {} iterations (tolerance "
+                 "{:.3g}); the tangent may be indefinite or too ill-conditioned (ν → 0.5): use cholmod or pcg-factor",
+                 amg.relative_residual, amg.iterations, m_options.pcg_relative_tolerance);
+        return stats;
+    }
     if (m_options.kind == LinearSolverKind::cholmod || !s.factored || k.rows() != s.pattern_rows) {
         direct();
         return stats;

@@ -75,6 +75,7 @@ void NewtonOptions::validate() const
 NewtonSolver::NewtonSolver(const TledModel& model, const NewtonOptions& options)
     : m_model(model), m_options(options), m_linear(options.linear)
 {
+    m_linear.set_node_coordinates(model.rest_positions());
     options.validate();
     m_assembler = std::make_unique<StiffnessAssembler>(model, nullptr);
     m_k = m_assembler->make_matrix();

@@ -4,6 +4,10 @@
 // - cholmod: supernodal Cholesky (SuiteSparse CHOLMOD, through Eigen). The symbolic analysis (fill-
 //   reducing ordering, supernodes) is done once per sparsity pattern and reused for every Newton
 //   step and tool position; each solve refactors numerically.
+// - pcg-amg: conjugate gradients preconditioned by one V-cycle of hypre's BoomerAMG with the
+//   elasticity options (3 unknowns per node, nodal coarsening, the rotations as interpolation
+//   vectors — needs set_node_coordinates). Memory and cost O(n) per iteration, but the setup is
+//   redone for every tangent and the iteration count grows as ν → 0.5.
 // - pcg-factor: conjugate gradients preconditioned by the Cholesky factor of an *earlier* tangent.
 //   Along a tool trajectory the tangent changes slowly, so a stale factor keeps PCG to a few
 //   iterations; the factor is renewed when PCG needs more than `refactor_iterations`.
@@ -15,11 +19,12 @@
 #include <Eigen/Core>
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace physreg {
 
-enum class LinearSolverKind { automatic, cholmod, pcg_factor };
-LinearSolverKind parse_linear_solver(const std::string& text); ///< auto | cholmod | pcg-factor
+enum class LinearSolverKind { automatic, cholmod, pcg_factor, pcg_amg };
+LinearSolverKind parse_linear_solver(const std::string& text); ///< auto | cholmod | pcg-factor | pcg-amg
 std::string to_string(LinearSolverKind kind);
 
 struct LinearSolveStats {
@@ -32,6 +37,7 @@ struct LinearSolveStats {
 struct LinearSolverOptions {
     LinearSolverKind kind = LinearSolverKind::automatic;
     double pcg_relative_tolerance = 1e-10; ///< ‖r‖ ≤ tol ‖b‖
+    int amg_max_iterations = 1000;         ///< pcg-amg: an error beyond this many iterations
     int refactor_iterations = 25;          ///< pcg-factor: renew the factor beyond this many iterations
     void validate() const;
 };
@@ -46,6 +52,9 @@ public:
     /// Solves K x = b. K (both triangles stored) keeps its sparsity pattern between calls. Throws
     /// Error when K cannot be factored even with a shift of 1e3 × its largest diagonal entry.
     LinearSolveStats solve(const SparseMatrix& k, const Eigen::VectorXd& b, Eigen::VectorXd& x);
+    /// Reference node positions (mm, 3 per node): pcg-amg builds the rigid rotations from them.
+    void set_node_coordinates(std::vector<double> xyz);
+
     /// Factors K now (shifted if it is not positive definite), for later solve_factored calls.
     LinearSolveStats factorise(const SparseMatrix& k);
     /// Solves with the factor of the last factorised matrix (modified Newton: a stale tangent).
