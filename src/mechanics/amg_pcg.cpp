@@ -120,8 +120,8 @@ AmgPcgResult solve_amg_pcg(const SparseMatrix& k, const Eigen::VectorXd& b, Eige
         }
     }
 
-    // BoomerAMG with hypre's recommended elasticity options (the GM-2 interpolation of the rigid
-    // modes, nodal coarsening on the row-sum norm of the 3×3 blocks), as one V-cycle per CG step.
+    // BoomerAMG for systems: nodal coarsening on the row-sum norm of the 3×3 blocks, as one V-cycle
+    // per CG step; with coordinates, also hypre's GM-2 interpolation of the rigid rotations.
     HYPRE_Solver amg;
     HYPRE_BoomerAMGCreate(&amg);
     HYPRE_BoomerAMGSetNumFunctions(amg, 3);

@@ -186,7 +186,8 @@ LinearSolveStats SymmetricSolver::solve(const SparseMatrix& k, const Eigen::Vect
     };
     if (m_options.kind == LinearSolverKind::pcg_amg) {
         const detail::AmgPcgResult amg =
-            detail::solve_amg_pcg(k, b, x, s.coordinates, m_options.pcg_relative_tolerance, m_options.amg_max_iterations);
+            detail::solve_amg_pcg(k, b, x, m_options.amg_rigid_modes ? s.coordinates : std::vector<double>{},
+                                  m_options.pcg_relative_tolerance, m_options.amg_max_iterations);
         stats.iterations = amg.iterations;
         stats.factorised = true; // the AMG setup plays the factorisation's part
         stats.factorisation_s = amg.setup_s;

@@ -17,8 +17,8 @@ struct AmgPcgResult {
 };
 
 /// Solves K x = b (K symmetric, both triangles stored, 3 interleaved unknowns per node) to
-/// ‖r‖ ≤ tolerance ‖b‖. `coordinates` (3 per node, mm) give the rigid rotations for the
-/// interpolation; empty: translations only.
+/// ‖r‖ ≤ tolerance ‖b‖. `coordinates` (3 per node, mm) add the rigid rotations to the
+/// interpolation; empty: the systems approach alone.
 AmgPcgResult solve_amg_pcg(const SparseMatrix& k, const Eigen::VectorXd& b, Eigen::VectorXd& x, const std::vector<double>& coordinates,
                            double tolerance, int max_iterations);
 
