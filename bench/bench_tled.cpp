@@ -3,6 +3,7 @@
 // double precision; and the time and iterations to reach equilibrium for a 10 mm indentation of
 // the 74×18×54 block by dynamic relaxation.
 // Run: build/bin/bench_tled --benchmark_out=bench/results/bench_tled.json --benchmark_out_format=json
+#include "physreg/mechanics/stiffness_assembly.hpp"
 #include "physreg/mechanics/tled_solver.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 
@@ -104,6 +105,25 @@ void BM_IndentationEquilibrium(benchmark::State& state)
 
 } // namespace
 
+// Assembly of the tangent stiffness (implicit solvers) of the 24×18×18 block, Neo-Hookean, at a
+// small deformation.
+void BM_Assembly(benchmark::State& state)
+{
+    const VolumeMesh& mesh = mesh_of(0);
+    const int threads = static_cast<int>(state.range(0));
+    omp_set_num_threads(threads);
+    const TledModel model(mesh, tissues(), {});
+    const StiffnessAssembler assembler(model);
+    SparseMatrix k = assembler.make_matrix();
+    std::vector<double> u(3 * model.node_count()), f(u.size());
+    for (std::size_t i = 0; i < u.size(); ++i) u[i] = 1e-3 * static_cast<double>(i % 7);
+    for (auto _ : state) assembler.assemble(u.data(), f.data(), &k);
+    state.counters["threads"] = threads;
+    state.counters["elements_per_s"] =
+        benchmark::Counter(double(model.element_count()), benchmark::Counter::kIsIterationInvariantRate);
+}
+
+BENCHMARK(BM_Assembly)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_TEMPLATE(BM_TledSteps, double)->ArgsProduct({{0, 1}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_TEMPLATE(BM_TledSteps, float)->ArgsProduct({{0, 1}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_IndentationEquilibrium)->Arg(2)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();

@@ -1,5 +1,7 @@
 #include "physreg/mechanics/stiffness_assembly.hpp"
 
+#include <omp.h>
+
 #include "physreg/core/error.hpp"
 
 #include <algorithm>
@@ -123,7 +125,11 @@ Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* 
     std::vector<double> element_energy(e_count, 0.0);
     std::int64_t inverted = -1, non_finite = -1, inverted_count = 0;
     const std::int64_t nnz = static_cast<std::int64_t>(m_inner.size());
-#pragma omp parallel
+    // The governor picks the team size from the timings of earlier calls (one thread when the
+    // machine is shared and the full team would wait at every colour's barrier).
+    const int team = m_governor.threads();
+    const double start = omp_get_wtime();
+#pragma omp parallel num_threads(team)
     {
 #pragma omp for schedule(static)
         for (std::int64_t k = 0; k < static_cast<std::int64_t>(3 * n); ++k) f[k] = 0.0;
@@ -228,6 +234,7 @@ Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* 
             inverted_count += my_inverted_count;
         }
     }
+    m_governor.record(omp_get_wtime() - start);
     Assembly result;
     result.inverted_element = inverted;
     result.non_finite_element = non_finite;

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <limits>
+#include <omp.h>
 
 namespace physreg {
 namespace {
@@ -56,6 +57,7 @@ void EquilibriumOptions::validate() const
 template <typename Real>
 TledSolver<Real>::TledSolver(const TledModel& model) : m_model(model), m_n(model.node_count())
 {
+    m_team = m_governor.threads();
     const int npe = model.nodes_per_element();
     for (const auto& g : model.geometries()) {
         for (int k = 0; k < 3 * npe; ++k) m_dn.push_back(static_cast<Real>(g.dn_dx[k]));
@@ -167,7 +169,7 @@ template <typename Real>
 void TledSolver<Real>::compute_internal_forces(const Real* u, Real* f)
 {
     m_inverted_element = LONG_MAX;
-#pragma omp parallel
+#pragma omp parallel num_threads(m_team)
     forces_in_parallel_region(u, f, true);
     if (m_inverted_element == LONG_MAX) m_inverted_element = -1;
 }
@@ -438,10 +440,15 @@ void TledSolver<Real>::advance(double duration_s, const ProgressCallback& progre
     long failed_step = 0;
     double largest = 0.0, step_largest = 0.0; // shared: reduced into by every thread each step
     m_inverted_element = LONG_MAX;
-    // One parallel region for the whole run: no fork/join per step, the serial bookkeeping is a
-    // `single` section between barriers.
-#pragma omp parallel
-    for (long step = 0; step < steps; ++step) {
+    // One parallel region per chunk of steps: no fork/join per step, the serial bookkeeping is a
+    // `single` section between barriers; between chunks the governor may change the team size.
+    const long chunk = 4;
+    for (long begin = 0; begin < steps && !failed; begin += chunk) {
+    const long end = std::min(steps, begin + chunk);
+    m_team = m_governor.threads();
+    const double chunk_start = omp_get_wtime();
+#pragma omp parallel num_threads(m_team)
+    for (long step = begin; step < end; ++step) {
         const Real* u = buffers[current];
         const Real* up = buffers[previous];
         Real* un = buffers[next];
@@ -497,6 +504,8 @@ void TledSolver<Real>::advance(double duration_s, const ProgressCallback& progre
             if (progress && (step % report_every == 0 || step + 1 == steps)) progress(double(step + 1) / double(steps), m_steps);
         }
         if (failed) break;
+    }
+    m_governor.record(omp_get_wtime() - chunk_start);
     }
     // Put the buffers back in place: m_u now, m_u_prev one step before.
     std::vector<Real>* vectors[3] = {&m_u_prev, &m_u, &m_u_next};
@@ -570,13 +579,16 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
     };
     refresh_contact();
     for (long iteration = 1; iteration <= options.max_iterations; ++iteration) {
+        // One iteration is one unit of work for the governor (timed to the end of the loop body).
+        const double iteration_start = omp_get_wtime();
+        m_team = m_governor.threads();
         const double factor = factor_at(iteration);
         const Real s = static_cast<Real>(factor);
         const Real beta = static_cast<Real>((2.0 - damping) / (2.0 + damping));
         const Real gain = static_cast<Real>(2.0 / (2.0 + damping));
         Real* un = m_u_next.data();
         const Real *u = m_u.data(), *up = m_u_prev.data(), *f = m_force.data(), *r = m_external.data();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) num_threads(m_team)
         for (std::size_t k = 0; k < dofs; ++k)
             un[k] = u[k] + beta * (u[k] - up[k]) + gain * inverse_mass[k / 3] * (s * r[k] - f[k]);
         constrain_with_active_set(un, factor, f, s);
@@ -592,7 +604,7 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
         double increment = 0.0, residual = 0.0, reference = 0.0, largest = 0.0;
         const Real* fn = m_force.data();
         const Real* fp = m_force_prev.data();
-#pragma omp parallel for schedule(static) reduction(max : increment, residual, reference, largest)
+#pragma omp parallel for schedule(static) reduction(max : increment, residual, reference, largest) num_threads(m_team)
         for (std::size_t blk = 0; blk < blocks; ++blk) {
             double nb = 0, db = 0;
             const std::size_t end = std::min(dofs, (blk + 1) * BLOCK);
@@ -660,6 +672,7 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
         const bool still = increment <= 1e-9 || estimate <= options.displacement_tolerance_mm;
         const bool balanced = residual <= std::max(options.residual_tolerance * reference, 1e-10);
         if (progress && iteration % 200 == 0) progress(-1.0, iteration);
+        m_governor.record(omp_get_wtime() - iteration_start);
         if (still && balanced && iteration > ramp) {
             summary.status = SolveStatus::converged;
             break;

@@ -13,6 +13,7 @@
 // a column of node j holds 3 consecutive rows per neighbour node, so element blocks are written
 // in place by precomputed offsets. Elements are assembled colour by colour on OpenMP threads (no
 // two elements of a colour share a node: no races, the same sums in the same order for any thread count).
+#include "physreg/core/thread_governor.hpp"
 #include "physreg/mechanics/tissue_coupling.hpp"
 #include "physreg/mechanics/tled_model.hpp"
 
@@ -68,6 +69,7 @@ private:
     std::vector<std::int64_t> m_coupling_index, m_coupling_begin; ///< coupling pairs' value offsets, per point
     std::vector<std::vector<double>> m_hourglass_gram; ///< per geometry: Σ_α Γ_aα Γ_bα (8×8)
     bool m_rotated_tangent = false;
+    mutable ThreadGovernor m_governor; ///< one assembly is one unit of work (not thread-safe: one caller at a time)
     std::vector<double> m_hourglass_k;         ///< per material: κ_hg M / 8 (times V Σ|b|² per geometry)
 };
 

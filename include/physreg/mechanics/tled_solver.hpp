@@ -8,6 +8,7 @@
 // each thread adds its forces straight into the nodal array. Every node receives its element
 // contributions in the same order whatever the thread count, and reductions are summed in fixed
 // blocks: results are bitwise identical for 1, 2 or more threads.
+#include "physreg/core/thread_governor.hpp"
 #include "physreg/mechanics/loads.hpp"
 #include "physreg/mechanics/tled_model.hpp"
 #include "physreg/mechanics/tissue_coupling.hpp"
@@ -110,6 +111,8 @@ private:
     const TledModel& m_model;
     Loads m_loads;
     const PenaltyCoupling* m_coupling = nullptr;
+    ThreadGovernor m_governor; ///< team size of the step and iteration loops, chosen by timing
+    int m_team = 1;            ///< the team size of the current step or iteration
     std::vector<double> m_stiffness_bound; ///< the model's plus the coupling's, N/mm
     double m_time_step = 0.0;
     std::size_t m_n = 0;
