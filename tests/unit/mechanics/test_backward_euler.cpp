@@ -231,6 +231,7 @@ TEST(BackwardEuler, StaleTangentFollowsTheExactNewtonTrajectory)
         BackwardEulerOptions be;
         be.time_step_s = 5e-3;
         be.tangent = update;
+        be.rotated_corotational_tangent = false; // the exact tangent: every-iteration is then Newton's method
         be.residual_tolerance = 1e-9;
         BackwardEuler integrator(model, be);
         integrator.set_loads(loads);
