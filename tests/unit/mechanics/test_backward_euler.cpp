@@ -48,6 +48,22 @@ double tip_deflection(const VolumeMesh& mesh, const std::vector<double>& u, doub
     return sum / static_cast<double>(tip.size());
 }
 
+// A co-rotational beam of nx × 2 × 2 hexahedra of 5 mm split into tetrahedra, clamped at x = 0.
+struct ClampedBeam {
+    VolumeMesh mesh;
+    TledModel model;
+    Loads loads;
+    ClampedBeam(int nx, double young_pa, double nu)
+        : mesh(split_hexahedra_into_tetrahedra(block_mesh(nx, 2, 2, 5.0))), model(mesh, beam_tissue(young_pa, nu, 1000), [] {
+              TledOptions options;
+              options.law = MaterialLaw::corotational;
+              return options;
+          }())
+    {
+        loads.constraints.push_back({"clamp", nodes_at(mesh, 0, 0.0), {true, true, true}, Vec3::Zero()});
+    }
+};
+
 } // namespace
 
 TEST(CorotationalTetrahedra, CantileverUnderGravityMatchesEulerBernoulli)
@@ -175,12 +191,10 @@ TEST(BackwardEuler, RayleighDampingMakesTheEnergyDecay)
     // A cantilever released from its gravity-loaded equilibrium (gravity switched off) vibrates;
     // the total energy (kinetic + strain) never grows, and mass + stiffness damping take away
     // more than backward Euler's own numerical dissipation.
-    const VolumeMesh mesh = split_hexahedra_into_tetrahedra(block_mesh(20, 2, 2, 5.0));
-    TledOptions options;
-    options.law = MaterialLaw::corotational;
-    const TledModel model(mesh, beam_tissue(1e6, 0.3, 1000), options);
-    Loads loads;
-    loads.constraints.push_back({"clamp", nodes_at(mesh, 0, 0.0), {true, true, true}, Vec3::Zero()});
+    const ClampedBeam beam(20, 1e6, 0.3);
+    const VolumeMesh& mesh = beam.mesh;
+    const TledModel& model = beam.model;
+    const Loads& loads = beam.loads;
     NewtonSolver statics(model);
     Loads loaded = loads;
     loaded.external_forces_n = gravity_forces(model, Vec3(0, 0, -2000));
@@ -219,12 +233,10 @@ TEST(BackwardEuler, StaleTangentFollowsTheExactNewtonTrajectory)
 {
     // A soft co-rotational block swinging under gravity with large rotation: the chord iterations
     // on an old factor and full Newton converge to the same steps.
-    const VolumeMesh mesh = split_hexahedra_into_tetrahedra(block_mesh(8, 2, 2, 5.0));
-    TledOptions options;
-    options.law = MaterialLaw::corotational;
-    const TledModel model(mesh, beam_tissue(1e4, 0.45, 1000), options);
-    Loads loads;
-    loads.constraints.push_back({"clamp", nodes_at(mesh, 0, 0.0), {true, true, true}, Vec3::Zero()});
+    const ClampedBeam beam(8, 1e4, 0.45);
+    const VolumeMesh& mesh = beam.mesh;
+    const TledModel& model = beam.model;
+    const Loads& loads = beam.loads;
     std::vector<std::vector<double>> finals;
     std::vector<int> factorisations;
     for (TangentUpdate update : {TangentUpdate::every_iteration, TangentUpdate::stale}) {
