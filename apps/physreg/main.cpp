@@ -5,20 +5,10 @@
 #include "physreg/core/log.hpp"
 #include "physreg/core/version.hpp"
 
-#include <cstdlib>
 #include <iostream>
-#include <unistd.h>
 
 int main(int argc, char** argv)
 {
-    // Threads that survive a shared machine: OpenMP threads that spin while they wait take the CPU
-    // from a partner thread or another process (bench/README.md, "threads on a shared machine"), so
-    // physreg waits passively unless the user chose a policy. libgomp reads OMP_WAIT_POLICY when it
-    // loads, before main, so the setting takes effect by running the program again once.
-    if (!std::getenv("OMP_WAIT_POLICY")) {
-        setenv("OMP_WAIT_POLICY", "passive", 1);
-        execv("/proc/self/exe", argv); // returns only on failure: then run with the default policy
-    }
     CLI::App app{"physreg — biomechanical volumetric registration for image-guided surgery.\n"
                  "Coordinates are physical mm in ITK's LPS space."};
     app.set_version_flag("--version", std::string("physreg ") + physreg::VERSION);
