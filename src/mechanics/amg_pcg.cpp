@@ -1,5 +1,6 @@
 #include "detail/amg_pcg.hpp"
 
+#include "detail/timing.hpp"
 #include "physreg/core/error.hpp"
 
 // The C API of MPI only (OpenMPI's deprecated C++ bindings would need libmpi_cxx).
@@ -24,10 +25,6 @@ HYPRE_Int HYPRE_BoomerAMGSetInterpRefine(HYPRE_Solver solver, HYPRE_Int num_refi
 namespace physreg::detail {
 namespace {
 
-double seconds_since(std::chrono::steady_clock::time_point start)
-{
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 // hypre needs MPI (Debian's build links OpenMPI) even on one process. A program that did not start
 // MPI itself (mpirun with physreg enrich does) gets a singleton MPI here, finalised at exit.

@@ -1,5 +1,6 @@
 #include "physreg/mechanics/backward_euler.hpp"
 
+#include "detail/timing.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
 
@@ -8,12 +9,9 @@
 #include <cmath>
 
 namespace physreg {
+using detail::seconds_since;
 namespace {
 
-double seconds_since(std::chrono::steady_clock::time_point start)
-{
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 double max_abs(const std::vector<double>& v)
 {
@@ -183,7 +181,8 @@ void BackwardEuler::set_state(const std::vector<double>& u, const std::vector<do
     m_v = v;
     m_time = time_s;
     BackwardEulerStep scratch;
-    evaluate_forces(m_u, m_force, scratch);
+    if (!forces_if_valid(m_u, m_force, scratch))
+        fail("backward Euler: the given state has an inverted element ({})", m_assembler.energy(m_u.data()).inverted_element);
 }
 
 double BackwardEuler::kinetic_energy_mj() const
@@ -195,19 +194,6 @@ double BackwardEuler::kinetic_energy_mj() const
 double BackwardEuler::strain_energy_mj() const
 {
     return m_assembler.energy(m_u.data()).energy_mj;
-}
-
-double BackwardEuler::evaluate_forces(const std::vector<double>& u, std::vector<double>& f, BackwardEulerStep& stats) const
-{
-    const auto start = std::chrono::steady_clock::now();
-    const Assembly a = m_assembler.assemble(u.data(), f.data(), nullptr);
-    stats.force_s += seconds_since(start);
-    if (a.inverted_element >= 0)
-        fail("backward Euler: element {} inverted at t = {:.6g} s; reduce the time step or the load, or add damping",
-             a.inverted_element, m_time + m_options.time_step_s);
-    if (a.non_finite_element >= 0)
-        fail("backward Euler: element {} has a non-finite force at t = {:.6g} s", a.non_finite_element, m_time + m_options.time_step_s);
-    return a.energy_mj;
 }
 
 bool BackwardEuler::forces_if_valid(const std::vector<double>& u, std::vector<double>& f, BackwardEulerStep& stats) const

@@ -1,5 +1,6 @@
 #include "physreg/mechanics/linear_solver.hpp"
 
+#include "detail/timing.hpp"
 #include "detail/amg_pcg.hpp"
 
 #include "physreg/core/error.hpp"
@@ -11,6 +12,7 @@
 #include <omp.h>
 
 namespace physreg {
+using detail::seconds_since;
 namespace {
 
 // OpenBLAS (OpenMP build) behind CHOLMOD runs its BLAS on the caller's OpenMP thread count. On
@@ -23,10 +25,6 @@ struct SingleThreadedBlas {
     ~SingleThreadedBlas() { omp_set_num_threads(saved); }
 };
 
-double seconds_since(std::chrono::steady_clock::time_point start)
-{
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 } // namespace
 

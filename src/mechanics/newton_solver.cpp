@@ -1,5 +1,6 @@
 #include "physreg/mechanics/newton_solver.hpp"
 
+#include "detail/timing.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 
@@ -9,13 +10,10 @@
 #include <cmath>
 
 namespace physreg {
+using detail::seconds_since;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point start)
-{
-    return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 // ∇²g of the signed distance to a tool at x (sphere and cylinder; flat tools have none).
 Mat3 distance_hessian(const Indenter& tool, const Vec3& x, double s, const Vec3& normal)

@@ -97,7 +97,6 @@ public:
     int total_factorisations() const { return m_total_factorisations; }
 
 private:
-    double evaluate_forces(const std::vector<double>& u, std::vector<double>& f, BackwardEulerStep& stats) const;
     bool forces_if_valid(const std::vector<double>& u, std::vector<double>& f, BackwardEulerStep& stats) const;
     void factorise_jacobian(const std::vector<double>& u, BackwardEulerStep& stats);
     bool attempt(BackwardEulerStep& stats, bool fresh_tangent_every_iteration);
