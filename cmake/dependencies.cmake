@@ -14,6 +14,7 @@ find_package(ZLIB REQUIRED)
 find_package(ITK 5.2 REQUIRED COMPONENTS
   ITKCommon ITKIOImageBase ITKIONIFTI ITKIONRRD ITKIOMeta ITKIOGDCM ITKIOPNG)
 find_package(pugixml REQUIRED)
+find_package(CGAL 5.5 REQUIRED) # Mesh_3: conforming tetrahedral meshes of label volumes (GPL-3.0-or-later)
 find_package(MPI REQUIRED COMPONENTS CXX) # OpenMPI: enrichment database builds across processes and machines
 find_package(NLopt 2.7 REQUIRED) # derivative-free optimisation (BOBYQA, Nelder–Mead): parameter estimation
 # CHOLMOD (SuiteSparse 5, Debian): supernodal Cholesky of the implicit solvers' tangents. Debian's

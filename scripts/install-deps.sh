@@ -14,6 +14,7 @@ packages=(
   libyaml-cpp-dev          # tissue tables
   libspdlog-dev libfmt-dev # logging, formatting
   libpugixml-dev           # VTU (XML) reading
+  libcgal-dev              # CGAL Mesh_3: conforming tetrahedral meshes of label volumes (ground-truth phantom)
   libnlopt-cxx-dev         # BOBYQA / Nelder–Mead: parameter estimation
   libopenmpi-dev openmpi-bin # enrichment database builds across processes (mpirun)
   zlib1g-dev               # compressed VTU arrays

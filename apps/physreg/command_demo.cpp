@@ -193,16 +193,13 @@ void add_subcommand_demo(CLI::App& app)
 
         step(2, "phantom dataset (" + preset + " preset) → phantom/");
         const fs::path phantom_dir = dir / "phantom";
-        // The demo's ground truth is 1.5× the model grid per axis (`physreg phantom` makes the 2× one):
-        // the full phantom alone takes 6.5–10 min on 2 cores, which would not leave the rest of the
-        // demo room in its 15 minutes.
-        PhantomSpec phantom_spec = PhantomSpec::preset_spec(preset);
-        if (!o->quick) phantom_spec.ground_truth_grid = {111, 81, 27};
+        // The demo's phantom is `physreg phantom`'s default: the body ground truth (docs/phantom.md).
+        const PhantomSpec phantom_spec = PhantomSpec::preset_spec(preset);
         bool reuse = false;
         if (!o->rebuild && fs::exists(phantom_dir / "manifest.json")) {
             try {
                 const PhantomDataset old = read_phantom_dataset(phantom_dir);
-                reuse = old.preset == preset && old.seed == 1 && old.generator_version == VERSION && old.ground_truth_grid == phantom_spec.ground_truth_grid;
+                reuse = old.preset == preset && old.seed == 1 && old.generator_version == VERSION;
             } catch (const Error&) {
                 reuse = false;
             }

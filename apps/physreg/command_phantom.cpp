@@ -33,7 +33,8 @@ void add_subcommand_phantom(CLI::App& app)
         std::vector<std::string> compressions;
         std::optional<double> resolution, tool_radius, insufflation_pa, landmark_noise, surface_noise;
         std::uint64_t seed = 1;
-        bool replace = false, single_precision = false;
+        bool replace = false, no_calculix = false;
+        std::optional<double> load_step;
     };
     auto o = std::make_shared<Options>();
     auto* sub = app.add_subcommand("phantom", "Make a phantom experiment dataset: images, ground-truth compressions, landmarks, "
@@ -43,21 +44,26 @@ void add_subcommand_phantom(CLI::App& app)
     sub->add_option("--label-roles", o->label_roles,
                     "Which labels are which organ, e.g. \"liver=1\" or \"body=1;liver=2;lesion=3;vessel=4;bone=5;kidney=6\" (the default)");
     sub->add_option("--vessel-mask", o->vessel_mask, "Label map on the same grid whose nonzero voxels inside the liver are vessels");
-    sub->add_option("--seed", o->seed, "Seed of noise, bias field and annotation noise (same seed → identical files)");
+    sub->add_option("--seed", o->seed, "Seed (1 … 4294967295) of the ground-truth materials and mesh, noise, bias field and annotation "
+                                       "noise (same seed → identical files)");
     sub->add_option("--resolution", o->resolution, "Preset image voxel size, mm (default 1.25; small: 4)");
-    sub->add_option("--ground-truth-grid", o->grid, "Ground-truth cells over the liver's bounding box, x×y×z (default 148x108x36: 2× paper 000's 74×54×18)");
-    sub->add_option("--materials", o->materials, "Material set: paper000 (default), healthy or cirrhotic (paper 001)");
-    sub->add_option("--depths", o->depths, "Depths of the five default compressions A–E, mm (default 10,12,10,8,10)");
+    sub->add_option("--ground-truth-size", o->grid, "Ground-truth tetrahedron sizes ORGAN,BODY (largest circumradius, mm; default 3,10; "
+                                                    "small: 7,18)");
+    sub->add_option("--materials", o->materials, "Literature values the ground-truth moduli are drawn around: paper000 (default), "
+                                                 "healthy or cirrhotic (paper 001)");
+    sub->add_option("--depths", o->depths, "Tool travel on the skin from first contact of the five default compressions A–E, mm "
+                                           "(default 20,25,20,15,22; small: 12,15,12,10,12)");
+    sub->add_option("--load-step", o->load_step, "Largest tool travel per Newton load step of the ground truth, mm (default 2.5)");
+    sub->add_flag("--no-calculix", o->no_calculix, "Skip the CalculiX validation of the ground truth (the manifest says so)");
     sub->add_option("--compression", o->compressions, "NAME:X:Z:DEPTH (mm, LPS) instead of the default five; repeatable");
     sub->add_option("--tool", o->tool, "Indenter shape: sphere (default), cylinder (a rod pressed sideways) or box");
-    sub->add_option("--tool-radius", o->tool_radius, "Sphere/cylinder radius, mm (default 12.5; small: 10)");
+    sub->add_option("--tool-radius", o->tool_radius, "Sphere/cylinder radius, mm (default 12.5; small: 15)");
     sub->add_option("--tool-direction", o->tool_direction, "Pressing direction x,y,z (LPS; default 0,1,0 = posterior)");
     sub->add_option("--tool-axis", o->tool_axis, "Cylinder axis x,y,z (default 1,0,0)");
     sub->add_option("--tool-half-extents", o->tool_half_extents, "Box half extents x,y,z, mm (default 12,6,12)");
     sub->add_option("--insufflation-pa", o->insufflation_pa, "Pressure on the anterior organ surfaces, Pa (default 3 % of the parenchyma's E; 0: none)");
     sub->add_option("--landmark-noise", o->landmark_noise, "Annotation noise σ of landmarks_noisy.csv, mm (default 0.5)");
     sub->add_option("--surface-noise", o->surface_noise, "Noise σ of the partial surfaces, mm (default 0.5)");
-    sub->add_flag("--float", o->single_precision, "Solve the ground truth in single precision (faster)");
     sub->add_option("-o,--output", o->output, "Dataset directory (created; must not exist or be empty unless --force)")->required();
     sub->add_flag("--force", o->replace, "Replace an existing dataset directory (only once the new one is complete)");
     sub->add_flag("--json", o->json, "Print the manifest and run times as JSON on stdout");
@@ -77,7 +83,15 @@ void add_subcommand_phantom(CLI::App& app)
             if (!o->from_labels.empty()) fail("--resolution applies to the presets; a label map keeps its own grid");
             spec.voxel_mm = *o->resolution;
         }
-        if (!o->grid.empty()) spec.ground_truth_grid = parse_grid_dims(o->grid, "--ground-truth-grid");
+        if (!o->grid.empty()) {
+            const auto sizes = parse_number_list(o->grid, "--ground-truth-size");
+            if (sizes.size() != 2) fail("--ground-truth-size: '{}' is not ORGAN,BODY (two sizes in mm)", o->grid);
+            spec.ground_truth_mesh.organ_cell_mm = sizes[0];
+            spec.ground_truth_mesh.kidney_cell_mm = 2.0 * sizes[0];
+            spec.ground_truth_mesh.body_cell_mm = sizes[1];
+        }
+        if (o->load_step) spec.load_step_mm = *o->load_step;
+        spec.calculix_validation = !o->no_calculix;
         spec.materials = parse_material_set(o->materials);
         if (!o->depths.empty()) spec.depths_mm = parse_number_list(o->depths, "--depths");
         spec.tool.shape = parse_indenter_shape(o->tool);
@@ -109,16 +123,17 @@ void add_subcommand_phantom(CLI::App& app)
         spec.insufflation_pa = o->insufflation_pa;
         if (o->landmark_noise) spec.landmark_noise_mm = *o->landmark_noise;
         if (o->surface_noise) spec.surface_noise_mm = *o->surface_noise;
-        spec.single_precision = o->single_precision;
         spec.validate();
 
         ProgressDisplay bar("phantom");
         const DatasetReport result = generate_phantom_dataset(spec, o->output, o->replace, [&](double f, const std::string& m) { bar.update(f, m); });
         bar.finish();
         const auto summary = nlohmann::json::parse(result.summary_json);
-        logger()->info("phantom dataset '{}': {} states, ground truth {} nodes / {} hexahedra, {:.1f} s", o->output,
-                       summary["states"].size(), summary["ground_truth"]["nodes"].get<long>(),
-                       summary["ground_truth"]["elements"].get<long>(), summary["timings"]["total_s"].get<double>());
+        const auto& models = summary["ground_truth"]["models"];
+        const auto& main_model = models.contains("body") ? models["body"] : models["organs"];
+        logger()->info("phantom dataset '{}': {} states, ground truth {} nodes / {} tetrahedra, {:.1f} s", o->output,
+                       summary["states"].size(), main_model["nodes"].get<long>(), main_model["elements"].get<long>(),
+                       summary["timings"]["total_s"].get<double>());
         report(*o, summary);
     });
 }

@@ -3,6 +3,8 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/types.hpp"
 
+#include <unsupported/Eigen/AutoDiff>
+
 namespace physreg {
 
 MaterialLaw parse_material_law(const std::string& text)
@@ -11,7 +13,8 @@ MaterialLaw parse_material_law(const std::string& text)
     if (text == "svk" || text == "st-venant-kirchhoff") return MaterialLaw::st_venant_kirchhoff;
     if (text == "linear" || text == "linear-elastic") return MaterialLaw::linear_elastic;
     if (text == "corotational" || text == "co-rotational") return MaterialLaw::corotational;
-    fail("material law '{}' is not one of neo-hookean, svk, linear, corotational", text);
+    if (text == "mooney-rivlin" || text == "mooney_rivlin") return MaterialLaw::mooney_rivlin;
+    fail("material law '{}' is not one of neo-hookean, svk, linear, corotational, mooney-rivlin", text);
 }
 
 std::string to_string(MaterialLaw law)
@@ -20,6 +23,7 @@ std::string to_string(MaterialLaw law)
     case MaterialLaw::neo_hookean: return "neo-hookean";
     case MaterialLaw::st_venant_kirchhoff: return "svk";
     case MaterialLaw::corotational: return "corotational";
+    case MaterialLaw::mooney_rivlin: return "mooney-rivlin";
     default: return "linear";
     }
 }
@@ -36,6 +40,7 @@ ElasticMaterial material_from_tissue(const Tissue& t)
     m.lambda_mpa = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
     m.kappa_mpa = e / (3.0 * (1.0 - 2.0 * nu));
     m.density_t_mm3 = t.density_kg_m3 * 1e-12; // kg/m³ → t/mm³
+    m.c01_mpa = t.mooney_rivlin_c01_fraction * 0.5 * m.mu_mpa;
     return m;
 }
 
@@ -48,6 +53,17 @@ double first_piola_tangent(MaterialLaw law, const ElasticMaterial& m, const doub
     const double mu = m.mu_mpa, lambda = m.lambda_mpa, kappa = m.kappa_mpa;
     const auto d = [](int i, int j) { return i == j ? 1.0 : 0.0; };
     const double j = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) + f[2] * (f[3] * f[7] - f[4] * f[6]);
+    if (law == MaterialLaw::mooney_rivlin) {
+        // Exact tangent by forward-mode automatic differentiation of P(F) (Eigen's AutoDiffScalar):
+        // no hand-derived fourth-order tensor to get wrong, machine-precision derivatives.
+        using Dual = Eigen::AutoDiffScalar<Eigen::Matrix<double, 9, 1>>;
+        Dual fd[9], pd[9];
+        for (int k = 0; k < 9; ++k) fd[k] = Dual(f[k], 9, k);
+        mooney_rivlin_stress<Dual>(0.5 * mu - m.c01_mpa, m.c01_mpa, kappa, fd, pd);
+        for (int r = 0; r < 9; ++r)
+            for (int c = 0; c < 9; ++c) a[9 * r + c] = pd[r].derivatives()[c];
+        return j;
+    }
     if (law == MaterialLaw::corotational) {
         double r[9];
         corotation(f, r);

@@ -168,6 +168,8 @@ Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* 
                     double energy = 0.0;
                     if (law == MaterialLaw::corotational) {
                         energy = v * corotational_stress(mat.mu_mpa, mat.lambda_mpa, F, P);
+                    } else if (law == MaterialLaw::mooney_rivlin) {
+                        energy = v * mooney_rivlin_stress<double>(0.5 * mat.mu_mpa - mat.c01_mpa, mat.c01_mpa, mat.kappa_mpa, F, P);
                     } else {
                         first_piola_kirchhoff<double>(law, mat.mu_mpa, mat.lambda_mpa, mat.kappa_mpa, F, P);
                         Mat3 fm;

@@ -57,6 +57,9 @@ void EquilibriumOptions::validate() const
 template <typename Real>
 TledSolver<Real>::TledSolver(const TledModel& model) : m_model(model), m_n(model.node_count())
 {
+    if (model.options().law == MaterialLaw::mooney_rivlin)
+        fail("material law mooney-rivlin: only the implicit solvers (newton, backward-euler) implement it, not TLED explicit "
+             "dynamics or dynamic relaxation");
     m_team = m_governor.threads();
     const int npe = model.nodes_per_element();
     for (const auto& g : model.geometries()) {

@@ -33,6 +33,9 @@ void TissueTable::validate(const std::string& what) const
             fail("{}: poisson_ratio = {} is impossible (must lie in (-1, 0.5))", who, t.poisson_ratio);
         if (!(std::isfinite(t.density_kg_m3) && t.density_kg_m3 > 0))
             fail("{}: density_kg_m3 = {} is impossible (must be finite and > 0)", who, t.density_kg_m3);
+        if (!(std::isfinite(t.mooney_rivlin_c01_fraction) && t.mooney_rivlin_c01_fraction >= 0.0 && t.mooney_rivlin_c01_fraction < 1.0))
+            fail("{}: mooney_rivlin_c01_fraction = {} is impossible (must lie in [0, 1): C10 = (1 − fraction) μ/2 must stay > 0)", who,
+                 t.mooney_rivlin_c01_fraction);
         if (ignored_labels.count(t.label)) fail("{}: label {} is both a tissue and ignored", what, t.label);
     }
 }
@@ -78,6 +81,7 @@ TissueTable read_tissue_table(const std::filesystem::path& path)
         t.young_modulus_pa = number("young_modulus_pa", std::nullopt);
         t.poisson_ratio = number("poisson_ratio", std::nullopt);
         t.density_kg_m3 = number("density_kg_m3", 1000.0);
+        t.mooney_rivlin_c01_fraction = number("mooney_rivlin_c01_fraction", 0.0);
         table.tissues.push_back(t);
     }
     if (root["ignore_labels"]) {
@@ -96,11 +100,14 @@ void write_tissue_table(const std::filesystem::path& path, const TissueTable& ta
     table.validate("tissue table for '" + path.string() + "'");
     YAML::Emitter out;
     out << YAML::BeginMap << YAML::Key << "tissues" << YAML::Value << YAML::BeginSeq;
-    for (const auto& t : table.tissues)
+    for (const auto& t : table.tissues) {
         out << YAML::Flow << YAML::BeginMap << YAML::Key << "label" << YAML::Value << t.label << YAML::Key
             << "name" << YAML::Value << t.name << YAML::Key << "young_modulus_pa" << YAML::Value
             << t.young_modulus_pa << YAML::Key << "poisson_ratio" << YAML::Value << t.poisson_ratio << YAML::Key
-            << "density_kg_m3" << YAML::Value << t.density_kg_m3 << YAML::EndMap;
+            << "density_kg_m3" << YAML::Value << t.density_kg_m3;
+        if (t.mooney_rivlin_c01_fraction != 0.0) out << YAML::Key << "mooney_rivlin_c01_fraction" << YAML::Value << t.mooney_rivlin_c01_fraction;
+        out << YAML::EndMap;
+    }
     out << YAML::EndSeq;
     if (!table.ignored_labels.empty()) {
         out << YAML::Key << "ignore_labels" << YAML::Value << YAML::Flow << YAML::BeginSeq;

@@ -11,6 +11,7 @@
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/io/png.hpp"
 #include "physreg/io/vtu.hpp"
+#include "physreg/mechanics/calculix.hpp"
 #include "physreg/mesh/coarsen.hpp"
 #include "physreg/mesh/faces.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
@@ -77,15 +78,6 @@ TissueTable phantom_tissue_table(MaterialSet set, const LabelRoles& roles, const
     return table;
 }
 
-EquilibriumOptions PhantomSpec::tight_equilibrium()
-{
-    EquilibriumOptions o;
-    o.displacement_tolerance_mm = 1e-3;
-    o.residual_tolerance = 1e-4;
-    o.max_iterations = 400000;
-    return o;
-}
-
 PhantomSpec PhantomSpec::preset_spec(const std::string& name)
 {
     PhantomSpec spec;
@@ -93,11 +85,16 @@ PhantomSpec PhantomSpec::preset_spec(const std::string& name)
     if (name == "cirs057a") return spec;
     if (name == "small") {
         spec.voxel_mm = 4.0;
-        spec.ground_truth_grid = {37, 27, 12};
-        spec.depths_mm = {6, 8, 6, 5, 6};
-        spec.tool.radius_mm = 12.0;
+        spec.ground_truth_mesh.organ_cell_mm = 7.0;
+        spec.ground_truth_mesh.kidney_cell_mm = 10.0;
+        spec.ground_truth_mesh.body_cell_mm = 18.0;
+        spec.ground_truth_mesh.facet_mm = 5.0;
+        spec.ground_truth_mesh.facet_distance_mm = 1.5;
+        spec.ground_truth_mesh.exude_seconds = 2.0;
+        spec.load_step_mm = 4.0;
+        spec.depths_mm = {12, 15, 12, 10, 12};
+        spec.tool.radius_mm = 15.0;
         spec.surface_percentages = {50, 10};
-        spec.equilibrium.displacement_tolerance_mm = 1e-3;
         return spec;
     }
     fail("unknown preset '{}' (cirs057a, small, or give a label map with --from-labels)", name);
@@ -108,8 +105,9 @@ void PhantomSpec::validate() const
     if (preset == "from-labels" && labels_file.empty()) fail("phantom: from-labels needs a label map");
     if (preset != "from-labels" && preset != "cirs057a" && preset != "small") fail("phantom: unknown preset '{}'", preset);
     if (!(voxel_mm >= 0.5 && voxel_mm <= 6.0)) fail("phantom: --resolution {} mm outside 0.5 … 6 mm", voxel_mm);
-    for (int a = 0; a < 3; ++a)
-        if (ground_truth_grid[a] < 2 || ground_truth_grid[a] > 2000) fail("phantom: ground-truth grid dimension {} outside 2 … 2000", ground_truth_grid[a]);
+    if (seed < 1 || seed > 4294967295ull) fail("phantom: --seed {} outside 1 … 4294967295", seed);
+    ground_truth_mesh.validate();
+    if (!(load_step_mm > 0.0 && load_step_mm <= 20.0)) fail("phantom: load step {} mm outside (0, 20]", load_step_mm);
     roles.validate("phantom label roles");
     for (const auto& c : compressions) {
         if (!(c.depth_mm > 0.0 && c.depth_mm <= 60.0)) fail("phantom: compression {}: depth {} mm outside (0, 60]", c.name, c.depth_mm);
@@ -125,8 +123,6 @@ void PhantomSpec::validate() const
     if (!(surface_noise_mm >= 0.0 && surface_noise_mm <= 10.0)) fail("phantom: surface noise {} mm outside [0, 10]", surface_noise_mm);
     for (const int p : surface_percentages)
         if (p <= 0 || p > 100) fail("phantom: surface percentage {} outside 1 … 100", p);
-    if (!(tool_speed_per_cell > 0.0 && tool_speed_per_cell <= 1.0)) fail("phantom: tool speed {} cells per iteration outside (0, 1]", tool_speed_per_cell);
-    equilibrium.validate();
 }
 
 const DatasetState& PhantomDataset::state(const std::string& name) const
@@ -138,7 +134,7 @@ const DatasetState& PhantomDataset::state(const std::string& name) const
 
 namespace {
 
-constexpr int format_version = 1;
+constexpr int format_version = 2; // 2: the body ground truth (tetrahedra, Mooney-Rivlin, gel)
 
 std::uint64_t mix_seed(std::uint64_t seed, const std::string& what)
 {
@@ -196,101 +192,60 @@ Prepared prepare_labels(const PhantomSpec& spec)
     return p;
 }
 
-// The ground-truth model: the organs that deform, on a grid finer than the evaluated models'.
+// The ground truth: materials drawn from the seed, the body model for the compressions, the organs
+// alone for the insufflation (ground_truth.hpp).
 struct GroundTruth {
     TissueTable tissues;
-    VolumeMesh mesh;
-    std::unique_ptr<TledModel> model;
-    std::vector<BoundaryFace> faces;
-    std::vector<std::int32_t> fixed_nodes, boundary_nodes;
-    Vec3 cell_size;
-    /// A model on a grid half as fine: its solution, interpolated, starts the fine relaxation.
-    std::unique_ptr<GroundTruth> pilot;
-    std::vector<NodeEmbedding> nodes_in_pilot;
+    json material_ranges;
+    GroundTruthModel body;
+    std::optional<GroundTruthModel> organs; ///< absent when the body model is the organs already
+    const GroundTruthModel& insufflation_model() const { return organs ? *organs : body; }
 };
-
-void build_model(GroundTruth& gt, const Prepared& p, const Index3& dims);
 
 GroundTruth build_ground_truth(const Prepared& p, const PhantomSpec& spec)
 {
     GroundTruth gt;
     std::set<std::int32_t> present;
     for (const auto& [label, n] : count_labels(p.labels)) present.insert(label);
-    gt.tissues = phantom_tissue_table(spec.materials, p.roles, present);
-    // Liver extent in voxels per image axis; cells per axis from the physical axis it follows.
-    const auto& g = p.labels.geometry;
-    Index3 lo{g.size[0], g.size[1], g.size[2]}, hi{-1, -1, -1};
-    Index3 mlo = lo, mhi = hi;
-    for (std::int64_t k = 0; k < g.size[2]; ++k)
-        for (std::int64_t j = 0; j < g.size[1]; ++j)
-            for (std::int64_t i = 0; i < g.size[0]; ++i) {
-                const auto label = p.labels.at(i, j, k);
-                const std::int64_t ijk[3] = {i, j, k};
-                if (p.roles.is_liver_tissue(label))
-                    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], ijk[a]), hi[a] = std::max(hi[a], ijk[a]);
-                if (gt.tissues.find(label))
-                    for (int a = 0; a < 3; ++a) mlo[a] = std::min(mlo[a], ijk[a]), mhi[a] = std::max(mhi[a], ijk[a]);
-            }
-    Index3 dims;
-    for (int a = 0; a < 3; ++a) {
-        int physical = 0;
-        for (int q = 1; q < 3; ++q)
-            if (std::abs(g.direction(q, a)) > std::abs(g.direction(physical, a))) physical = q;
-        const std::int64_t liver_voxels = hi[a] - lo[a] + 1, organ_voxels = mhi[a] - mlo[a] + 1;
-        const std::int64_t wanted = spec.ground_truth_grid[physical];
-        if (wanted > liver_voxels)
-            logger()->warn("ground truth: {} cells wanted along image axis {} but the liver spans {} voxels; using {}",
-                           wanted, a, liver_voxels, liver_voxels);
-        const double voxels_per_cell = static_cast<double>(liver_voxels) / static_cast<double>(std::min(wanted, liver_voxels));
-        dims[a] = std::clamp<std::int64_t>(std::llround(static_cast<double>(organ_voxels) / voxels_per_cell), 1, organ_voxels);
-    }
-    build_model(gt, p, dims);
-    if (gt.mesh.cell_count() <= 20000) return gt; // small enough to relax directly from rest
-    gt.pilot = std::make_unique<GroundTruth>();
-    gt.pilot->tissues = gt.tissues;
-    Index3 pilot_dims;
-    for (int a = 0; a < 3; ++a) pilot_dims[a] = std::max<std::int64_t>(2, (dims[a] + 1) / 2);
-    build_model(*gt.pilot, p, pilot_dims);
-    gt.nodes_in_pilot = embed_in_grid_mesh(gt.pilot->mesh, gt.mesh.nodes);
+    gt.tissues = draw_ground_truth_tissues(spec.materials, p.roles, present, mix_seed(spec.seed, "materials"), gt.material_ranges);
+    gt.body = build_body_model(p.labels, p.roles, gt.tissues, spec.ground_truth_mesh, static_cast<unsigned>(spec.seed));
+    if (gt.body.name == "body") gt.organs = build_organ_model(gt.body, p.roles, gt.tissues);
     return gt;
 }
 
-void build_model(GroundTruth& gt, const Prepared& p, const Index3& dims)
+// Points (landmarks) in a tetrahedral mesh: the containing cell, else the nearest cell within
+// `max_distance_mm` with barycentric coordinates clamped to it; farther points are an error.
+std::vector<NodeEmbedding> embed_points(const VolumeMesh& mesh, const LandmarkSet& points, double max_distance_mm, const std::string& what)
 {
-    MeshingOptions options;
-    options.grid_dims = dims;
-    options.components = ComponentPolicy::keep_all;
-    auto meshed = mesh_label_volume(p.labels, gt.tissues, options, p.source);
-    gt.mesh = std::move(meshed.mesh);
-    gt.cell_size = gt.mesh.grid->cell_size;
-    TledOptions tled;
-    gt.model = std::make_unique<TledModel>(gt.mesh, gt.tissues, tled);
-    gt.faces = boundary_faces(gt.mesh);
-    std::vector<char> fixed(gt.mesh.node_count(), 0), boundary(gt.mesh.node_count(), 0);
-    for (const auto& f : gt.faces)
-        for (int a = 0; a < f.count; ++a) {
-            boundary[static_cast<std::size_t>(f.nodes[a])] = 1;
-            // The organs rest on their posterior surfaces (the phantom's base, the back).
-            if (f.normal.y() > 0.5) fixed[static_cast<std::size_t>(f.nodes[a])] = 1;
+    const PointLocator locator(mesh);
+    std::vector<NodeEmbedding> out;
+    for (const auto& l : points) {
+        if (auto e = locator.locate(l.position)) {
+            out.push_back(*e);
+            continue;
         }
-    for (std::size_t n = 0; n < fixed.size(); ++n) {
-        if (fixed[n]) gt.fixed_nodes.push_back(static_cast<std::int32_t>(n));
-        if (boundary[n]) gt.boundary_nodes.push_back(static_cast<std::int32_t>(n));
+        NodeEmbedding best;
+        best.distance_mm = std::numeric_limits<double>::infinity();
+        for (std::size_t c = 0; c < mesh.cell_count(); ++c) {
+            const auto ids = mesh.cell(c);
+            if ((mesh.nodes[ids[0]] - l.position).norm() > best.distance_mm + 50.0) continue;
+            bool ok = true;
+            Vec3 xi = natural_coordinates(mesh, c, l.position, ok);
+            if (!ok) continue;
+            // Clamp to the simplex: negative barycentric weights to zero, renormalised.
+            double w[4] = {1.0 - xi.sum(), xi[0], xi[1], xi[2]}, sum = 0;
+            for (double& v : w) sum += (v = std::max(0.0, v));
+            for (double& v : w) v /= sum;
+            const Vec3 q = w[0] * mesh.nodes[ids[0]] + w[1] * mesh.nodes[ids[1]] + w[2] * mesh.nodes[ids[2]] + w[3] * mesh.nodes[ids[3]];
+            const double d = (q - l.position).norm();
+            if (d < best.distance_mm) best = {static_cast<std::int32_t>(c), Vec3(w[1], w[2], w[3]), false, d};
+        }
+        if (!(best.distance_mm <= max_distance_mm))
+            fail("landmark {} lies {:.2f} mm outside the ground-truth mesh ({}; at most {:.1f} mm allowed)", l.name, best.distance_mm, what,
+                 max_distance_mm);
+        out.push_back(best);
     }
-    // Every piece needs support, else the static problem has rigid modes.
-    std::vector<std::int32_t> parent(gt.mesh.node_count());
-    std::iota(parent.begin(), parent.end(), 0);
-    std::function<std::int32_t(std::int32_t)> root = [&](std::int32_t q) { return parent[q] == q ? q : parent[q] = root(parent[q]); };
-    for (std::size_t c = 0; c < gt.mesh.cell_count(); ++c) {
-        const auto cell = gt.mesh.cell(c);
-        for (int a = 1; a < gt.mesh.cell_size(); ++a) parent[root(cell[a])] = root(cell[0]);
-    }
-    std::set<std::int32_t> supported;
-    for (const auto n : gt.fixed_nodes) supported.insert(root(n));
-    for (std::size_t n = 0; n < gt.mesh.node_count(); ++n)
-        if (!supported.count(root(static_cast<std::int32_t>(n))))
-            fail("ground truth: a piece of the organs (node {} at {:.1f}, {:.1f}, {:.1f} mm) has no posterior surface to rest on",
-                 n, gt.mesh.nodes[n].x(), gt.mesh.nodes[n].y(), gt.mesh.nodes[n].z());
+    return out;
 }
 
 Vec3 liver_centroid(const Prepared& p, Vec3& lo, Vec3& hi)
@@ -352,7 +307,7 @@ bool line_hits(const LabelVolume& labels, const Vec3& start, const Vec3& d, doub
 }
 
 std::vector<CompressionSpec> default_compressions(const Prepared& p, const PhantomSpec& spec, const Vec3& lo, const Vec3& hi,
-                                                  double image_length)
+                                                  double image_length, bool through_gel)
 {
     // Five positions over the liver, as fractions of its x (right→left) and z (inferior→superior) extent.
     const std::pair<double, double> pattern[] = {{0.45, 0.5}, {0.25, 0.45}, {0.62, 0.55}, {0.4, 0.25}, {0.55, 0.75}};
@@ -364,7 +319,9 @@ std::vector<CompressionSpec> default_compressions(const Prepared& p, const Phant
         s.tool = spec.tool;
         s.depth_mm = spec.depths_mm[static_cast<std::size_t>(c) % spec.depths_mm.size()];
         const double x0 = lo.x() + pattern[c].first * (hi.x() - lo.x()), z0 = lo.z() + pattern[c].second * (hi.z() - lo.z());
-        // Nearest column (in 2 mm rings) through the liver.
+        // Nearest column (in 2 mm rings) through the liver. A tool pressing the liver itself needs
+        // liver well beyond its depth; one pressing the gel above it, a liver worth aiming at.
+        const double required = through_gel ? 30.0 : std::max(30.0, 2.5 * s.depth_mm);
         bool found = false;
         for (double r = 0; r <= 60 && !found; r += 2)
             for (int a = 0; a < std::max(1, static_cast<int>(std::ceil(2 * M_PI * r / 2))) && !found; ++a) {
@@ -373,13 +330,13 @@ std::vector<CompressionSpec> default_compressions(const Prepared& p, const Phant
                 // A column through enough liver that the depth stays well inside it.
                 const double thickness = length_inside(p.labels, Vec3(x, start_y.y(), z), Vec3::UnitY(), 2 * image_length,
                                                        [&](std::int32_t l) { return p.roles.is_liver_tissue(l); });
-                if (thickness >= std::max(30.0, 2.5 * s.depth_mm)) {
+                if (thickness >= required) {
                     s.x_mm = x;
                     s.z_mm = z;
                     found = true;
                 }
             }
-        if (!found) fail("compression {}: no column through ≥ {:.0f} mm of liver within 60 mm of x = {:.1f}, z = {:.1f} mm", s.name, std::max(30.0, 2.5 * s.depth_mm), x0, z0);
+        if (!found) fail("compression {}: no column through ≥ {:.0f} mm of liver within 60 mm of x = {:.1f}, z = {:.1f} mm", s.name, required, x0, z0);
         out.push_back(s);
     }
     return out;
@@ -399,151 +356,15 @@ Indenter make_indenter(const CompressionSpec& c, const Vec3& start, const Vec3& 
 
 struct SolvedState {
     std::vector<double> u;
-    long iterations = 0, pilot_iterations = 0;
-    double seconds = 0.0;
-    double max_displacement_mm = 0.0;
-    double max_penetration_mm = 0.0;
+    GroundTruthSolve solve;
     std::optional<Indenter> tool;
     CompressionSpec compression;
     double pressure_pa = 0.0;
 };
 
-double max_norm(const std::vector<double>& u)
-{
-    double m = 0.0;
-    for (std::size_t n = 0; n + 2 < u.size(); n += 3) m = std::max(m, std::sqrt(u[n] * u[n] + u[n + 1] * u[n + 1] + u[n + 2] * u[n + 2]));
-    return m;
-}
-
-template <typename Real>
-GroundTruthSolution solve_with(const TledModel& model, const Loads& loads, const EquilibriumOptions& options, int load_steps,
-                               const std::vector<std::int32_t>& surface_nodes, const std::string& what, const std::vector<double>* initial)
-{
-    TledSolver<Real> solver(model);
-    solver.set_loads(loads);
-    if (initial) solver.set_displacement(*initial);
-    GroundTruthSolution s;
-    const auto t0 = std::chrono::steady_clock::now();
-    for (int step = 1; step <= load_steps; ++step) {
-        EquilibriumOptions o = options;
-        if (step < load_steps) o.displacement_tolerance_mm *= 10.0;
-        SolveSummary summary;
-        try {
-            summary = solver.solve_equilibrium(o, static_cast<double>(step) / load_steps);
-        } catch (const Error& e) {
-            fail("ground truth for {}: {} (load step {} of {}; try a smaller depth or a larger tool)", what, e.what(), step, load_steps);
-        }
-        s.iterations += summary.iterations;
-        if (!summary.converged())
-            fail("ground truth for {}: no equilibrium after {} iterations (load step {} of {}): {}", what, summary.iterations, step,
-                 load_steps, summary.message);
-    }
-    s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    s.displacement_mm = solver.displacement_mm();
-    s.max_displacement_mm = max_norm(s.displacement_mm);
-    const auto& rest = model.rest_positions();
-    const auto& u = s.displacement_mm;
-    for (const auto& tool : solver.loads().indenters)
-        for (const auto n : surface_nodes) {
-            const auto q = 3 * static_cast<std::size_t>(n);
-            const Vec3 x(rest[q] + u[q], rest[q + 1] + u[q + 1], rest[q + 2] + u[q + 2]);
-            Vec3 surface, normal;
-            if (tool.push_out(x, 1.0, surface, normal)) s.max_node_penetration_mm = std::max(s.max_node_penetration_mm, (surface - x).norm());
-        }
-    return s;
-}
-
-SolvedState solved_from(const GroundTruthSolution& solution)
-{
-    SolvedState s;
-    s.u = solution.displacement_mm;
-    s.iterations = solution.iterations;
-    s.seconds = solution.seconds;
-    s.max_displacement_mm = solution.max_displacement_mm;
-    s.max_penetration_mm = solution.max_node_penetration_mm;
-    return s;
-}
-
-// Loads of one state on a model: the posterior support plus `extra` (tools or pressure).
-using LoadMaker = std::function<Loads(const GroundTruth&)>;
-
-Loads supported(const GroundTruth& m)
-{
-    Loads loads;
-    loads.constraints.push_back({"posterior_support", m.fixed_nodes, {true, true, true}, Vec3::Zero()});
-    return loads;
-}
-
-// Nested solve: the pilot model (half the resolution) goes to equilibrium from rest with the loads
-// ramped; its displacement, interpolated, starts the fine model, whose relaxation then only has to
-// resolve what the pilot could not (≈ 2× fewer fine iterations than a ramp on the fine model).
-SolvedState solve_state(const GroundTruth& gt, const PhantomSpec& spec, const LoadMaker& pilot_loads, long pilot_ramp,
-                        const LoadMaker& fine_loads, long fine_ramp, long direct_ramp, const std::string& what)
-{
-    if (!gt.pilot) { // a small model: `pilot_loads` on the fine model, from rest
-        EquilibriumOptions options = spec.equilibrium;
-        options.ramp_iterations = direct_ramp;
-        return solved_from(solve_ground_truth(*gt.model, pilot_loads(gt), options, 1, spec.single_precision, gt.boundary_nodes, what));
-    }
-    EquilibriumOptions pilot_options = spec.equilibrium;
-    pilot_options.displacement_tolerance_mm *= 4.0;
-    pilot_options.ramp_iterations = pilot_ramp;
-    const GroundTruthSolution pilot = solve_ground_truth(*gt.pilot->model, pilot_loads(*gt.pilot), pilot_options, 1,
-                                                         spec.single_precision, gt.pilot->boundary_nodes, what + " (pilot)");
-    // The pilot's one-point hexahedra carry hourglass patterns under a tool; interpolated as they are,
-    // they can fold fine elements. Cell means then node means remove them (the pattern averages to
-    // zero over a cell) and keep the smooth part, which is what the fine relaxation needs.
-    logger()->debug("{}: pilot {} iterations, {:.1f} s", what, pilot.iterations, pilot.seconds);
-    std::vector<double> smooth(pilot.displacement_mm.size(), 0.0);
-    {
-        const VolumeMesh& pm = gt.pilot->mesh;
-        std::vector<double> cell_mean(3 * pm.cell_count(), 0.0), count(pm.node_count(), 0.0);
-        for (std::size_t c = 0; c < pm.cell_count(); ++c)
-            for (const auto n : pm.cell(c))
-                for (int k = 0; k < 3; ++k) cell_mean[3 * c + k] += pilot.displacement_mm[3 * static_cast<std::size_t>(n) + k] / pm.cell_size();
-        for (std::size_t c = 0; c < pm.cell_count(); ++c)
-            for (const auto n : pm.cell(c)) {
-                for (int k = 0; k < 3; ++k) smooth[3 * static_cast<std::size_t>(n) + k] += cell_mean[3 * c + k];
-                count[static_cast<std::size_t>(n)] += 1.0;
-            }
-        for (std::size_t n = 0; n < pm.node_count(); ++n)
-            for (int k = 0; k < 3; ++k) smooth[3 * n + k] /= count[n];
-    }
-    std::vector<double> start(3 * gt.mesh.node_count());
-    for (std::size_t n = 0; n < gt.mesh.node_count(); ++n) {
-        // Fine nodes outside the pilot mesh take the displacement of its nearest point (no extrapolation:
-        // extrapolating a strongly deformed cell can fold the fine elements there).
-        NodeEmbedding where = gt.nodes_in_pilot[n];
-        where.natural = where.natural.cwiseMax(-1.0).cwiseMin(1.0);
-        const auto u = interpolate_nodal(gt.pilot->mesh, where, smooth, 3);
-        for (int k = 0; k < 3; ++k) start[3 * n + k] = u[static_cast<std::size_t>(k)];
-    }
-    const Loads loads = fine_loads(gt);
-    for (const auto& c : loads.constraints)
-        for (const auto n : c.nodes)
-            for (int k = 0; k < 3; ++k)
-                if (c.dofs[k]) start[3 * static_cast<std::size_t>(n) + k] = 0.0; // support: exactly fixed
-    EquilibriumOptions fine_options = spec.equilibrium;
-    fine_options.ramp_iterations = fine_ramp;
-    GroundTruthSolution solution;
-    try {
-        solution = solve_ground_truth(*gt.model, loads, fine_options, 1, spec.single_precision, gt.boundary_nodes, what, &start);
-    } catch (const Error& e) {
-        // Where the pilot's coarser cells cannot follow a thin feature, the interpolated start can
-        // fold a fine element; the fine model then relaxes from rest (slower, same criterion).
-        logger()->warn("{}: the pilot's shape does not fit the fine model ({}); relaxing the fine model from rest", what, e.what());
-        EquilibriumOptions options = spec.equilibrium;
-        options.ramp_iterations = direct_ramp;
-        solution = solve_ground_truth(*gt.model, pilot_loads(gt), options, 1, spec.single_precision, gt.boundary_nodes, what);
-    }
-    SolvedState s = solved_from(solution);
-    s.pilot_iterations = pilot.iterations;
-    s.seconds += pilot.seconds;
-    return s;
-}
-
 SolvedState solve_compression(const GroundTruth& gt, const PhantomSpec& spec, const Prepared& p, const CompressionSpec& c)
 {
+    const GroundTruthModel& m = gt.body;
     const Vec3 d = c.direction.normalized();
     const auto& g = p.labels.geometry;
     Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
@@ -560,34 +381,27 @@ SolvedState solve_compression(const GroundTruth& gt, const PhantomSpec& spec, co
     if (!line_hits(p.labels, start, d, 2 * length, [](std::int32_t l) { return l != 0; }))
         fail("compression {}: the tool line x = {:.1f} mm, z = {:.1f} mm misses the phantom's body (outside the body)", c.name, c.x_mm, c.z_mm);
     {
-        // The tissue the tool presses on: organ voxels along its line. A depth near that thickness
-        // would drive the tool through the organ.
-        const double thickness = length_inside(p.labels, start, d, 2 * length, [&](std::int32_t l) { return gt.tissues.find(l) != nullptr; });
+        // The tissue the tool presses on along its line: a depth near that thickness would drive the
+        // tool through it.
+        const double thickness = length_inside(p.labels, start, d, 2 * length, [&](std::int32_t l) { return m.labels.count(l) > 0; });
         if (c.depth_mm > 0.6 * thickness)
-            fail("compression {}: depth {:.1f} mm exceeds 60 % of the organs' thickness along the tool's line ({:.1f} mm at x = {:.1f}, "
-                 "z = {:.1f} mm)", c.name, c.depth_mm, thickness, c.x_mm, c.z_mm);
+            fail("compression {}: depth {:.1f} mm exceeds 60 % of the simulated tissue's thickness along the tool's line ({:.1f} mm at "
+                 "x = {:.1f}, z = {:.1f} mm)", c.name, c.depth_mm, thickness, c.x_mm, c.z_mm);
     }
-    const GroundTruth& first = gt.pilot ? *gt.pilot : gt; // the model the tool meets first
-    // A sphere slips through a cell face whose half-diagonal exceeds its radius.
-    double across_squared = 0.0;
-    for (int k = 0; k < 3; ++k)
-        if (std::abs(d[k]) < 0.9) across_squared += first.cell_size[k] * first.cell_size[k];
-    const double across = std::sqrt(across_squared);
+    // Node-to-surface contact holds nodes: the tool must span several surface facets.
     const double width = c.tool.shape == IndenterShape::box ? 2.0 * c.tool.half_extents_mm.minCoeff() : 2.0 * c.tool.radius_mm;
-    if (width < across)
-        fail("compression {}: the tool ({:.1f} mm across) is narrower than the ground-truth cells across the pressing direction "
-             "({:.1f} mm); node-to-surface contact would let it slip between nodes — use a larger --tool-radius or a finer "
-             "--ground-truth-grid", c.name, width, across);
+    if (width < 2.0 * spec.ground_truth_mesh.facet_mm)
+        fail("compression {}: the tool ({:.1f} mm across) is narrower than two surface facets of the ground truth ({:.1f} mm); "
+             "use a larger --tool-radius", c.name, width, 2.0 * spec.ground_truth_mesh.facet_mm);
     const double reach = c.tool.shape == IndenterShape::box ? c.tool.half_extents_mm.norm() : c.tool.radius_mm;
     Indenter probe = make_indenter(c, start, start + 3 * length * d);
     probe.validate();
-    // First contact: the smallest travel at which a boundary node is inside the tool.
+    // First contact: the smallest travel at which a surface node is inside the tool.
     std::vector<Vec3> candidates;
-    for (const auto n : gt.boundary_nodes) {
-        const Vec3& x = gt.mesh.nodes[static_cast<std::size_t>(n)];
+    for (const auto n : m.model->surface_nodes()) {
+        const Vec3& x = m.mesh.nodes[static_cast<std::size_t>(n)];
         const Vec3 r = x - start;
-        const bool near_line = (r - r.dot(d) * d).norm() <= reach + 1.0 || c.tool.shape == IndenterShape::cylinder;
-        if (near_line) candidates.push_back(x);
+        if ((r - r.dot(d) * d).norm() <= reach + 1.0 || c.tool.shape == IndenterShape::cylinder) candidates.push_back(x);
     }
     auto touches = [&](double t) {
         Indenter tool = make_indenter(c, start + t * d, start + t * d);
@@ -602,68 +416,49 @@ SolvedState solve_compression(const GroundTruth& gt, const PhantomSpec& spec, co
             t_hit = t;
             break;
         }
-    if (t_hit < 0) fail("compression {}: the tool along x = {:.1f} mm, z = {:.1f} mm never touches the organs", c.name, c.x_mm, c.z_mm);
+    if (t_hit < 0) fail("compression {}: the tool along x = {:.1f} mm, z = {:.1f} mm never touches the {}", c.name, c.x_mm, c.z_mm, m.name);
     double a = std::max(0.0, t_hit - 0.5), b = t_hit;
     for (int it = 0; it < 30; ++it) (touches(0.5 * (a + b)) ? b : a) = 0.5 * (a + b);
     const Vec3 contact = start + a * d, end = contact + c.depth_mm * d;
-    // The tool moves during the first iterations. Information travels about one element per
-    // relaxation iteration, so a tool faster than ~1 % of the smallest cell per iteration crushes the
-    // elements under it; the smooth ramp peaks at 1.875× its mean speed. The pilot's tool starts two
-    // of its cells back (its coarser surface may stand proud of the fine one); the fine model starts
-    // from the pilot's shape with its tool two pilot cells back, then pressed home.
-    const double pilot_h = first.cell_size.minCoeff(), back = 2.0 * first.cell_size.maxCoeff();
-    auto ramp = [&](double travel, double h) {
-        return std::max<long>(spec.equilibrium.ramp_iterations, std::lround(std::ceil(1.875 * travel / (spec.tool_speed_per_cell * h))));
-    };
-    const LoadMaker pilot_loads = [&](const GroundTruth& m) {
-        Loads loads = supported(m);
-        loads.indenters.push_back(make_indenter(c, contact - back * d, end));
-        return loads;
-    };
-    const LoadMaker fine_loads = [&](const GroundTruth& m) {
-        Loads loads = supported(m);
-        loads.indenters.push_back(make_indenter(c, end - back * d, end));
-        return loads;
-    };
-    SolvedState s = solve_state(gt, spec, pilot_loads, ramp(c.depth_mm + back, pilot_h), fine_loads, ramp(back, gt.cell_size.minCoeff()),
-                                ramp(c.depth_mm + back, gt.cell_size.minCoeff()), "compression " + c.name);
+    SolvedState s;
     s.tool = make_indenter(c, contact, end);
-    // Node-to-surface contact holds nodes, not faces: a tool too small for the cells can slip between
-    // surface nodes into the tissue. Then deformed cell centres end up inside the tool.
-    for (std::size_t e = 0; e < gt.mesh.cell_count(); ++e) {
+    Loads loads;
+    loads.indenters.push_back(*s.tool);
+    const int steps = std::max(1, static_cast<int>(std::ceil(c.depth_mm / spec.load_step_mm - 1e-9)));
+    s.solve = solve_ground_truth_state(m, loads, steps, "compression " + c.name);
+    s.u = s.solve.displacement_mm;
+    // A tool that slipped between surface nodes swallows whole cells.
+    for (std::size_t e = 0; e < m.mesh.cell_count(); ++e) {
         Vec3 centre = Vec3::Zero();
-        for (const auto n : gt.mesh.cell(e)) {
+        for (const auto n : m.mesh.cell(e)) {
             const auto q = 3 * static_cast<std::size_t>(n);
-            centre += (gt.mesh.nodes[static_cast<std::size_t>(n)] + Vec3(s.u[q], s.u[q + 1], s.u[q + 2])) / gt.mesh.cell_size();
+            centre += (m.mesh.nodes[static_cast<std::size_t>(n)] + Vec3(s.u[q], s.u[q + 1], s.u[q + 2])) / m.mesh.cell_size();
         }
         Vec3 surface, normal;
-        // Cells wrapped around the tool have their centres inside it by the chord sag; a slipped tool
-        // swallows whole cells.
-        if (s.tool->push_out(centre, 1.0, surface, normal) && (surface - centre).norm() > 0.5 * gt.cell_size.minCoeff())
-            fail("compression {}: the tool slipped past the surface nodes into the tissue (element {} ends inside it; use a larger "
-                 "tool or a finer ground-truth grid)", c.name, e);
+        if (s.tool->push_out(centre, 1.0, surface, normal) && (surface - centre).norm() > 0.5 * spec.ground_truth_mesh.facet_mm)
+            fail("compression {}: the tool slipped past the surface nodes into the tissue (element {} ends inside it; use a larger tool)",
+                 c.name, e);
     }
     s.compression = c;
     return s;
 }
 
-SolvedState solve_insufflation(const GroundTruth& gt, const PhantomSpec& spec, double pressure_pa)
+SolvedState solve_insufflation(const GroundTruth& gt, double pressure_pa)
 {
-    // Pressure on the anterior-facing surface (dead load along the rest normal): N = Pa · 1e-6 · mm².
-    const LoadMaker pressure_loads = [&](const GroundTruth& m) {
-        Loads loads = supported(m);
-        loads.external_forces_n.assign(3 * m.mesh.node_count(), 0.0);
-        for (const auto& f : m.faces) {
-            if (f.normal.y() > -0.2) continue;
-            const Vec3 force = -pressure_pa * 1e-6 * f.area * f.normal;
-            for (int a = 0; a < f.count; ++a)
-                for (int k = 0; k < 3; ++k) loads.external_forces_n[3 * static_cast<std::size_t>(f.nodes[a]) + k] += force[k] / f.count;
-        }
-        return loads;
-    };
-    // The fine model starts from the pilot's shape under the full pressure at once (ramp of 1).
-    SolvedState s = solve_state(gt, spec, pressure_loads, spec.equilibrium.ramp_iterations, pressure_loads, 1,
-                                spec.equilibrium.ramp_iterations, "insufflation");
+    // Gas pressure on the organs' anterior-facing surface (dead load along the rest normal):
+    // N = Pa · 1e-6 · mm².
+    const GroundTruthModel& m = gt.insufflation_model();
+    Loads loads;
+    loads.external_forces_n.assign(3 * m.mesh.node_count(), 0.0);
+    for (const auto& f : m.faces) {
+        if (f.normal.y() > -0.2) continue;
+        const Vec3 force = -pressure_pa * 1e-6 * f.area * f.normal;
+        for (int a = 0; a < f.count; ++a)
+            for (int k = 0; k < 3; ++k) loads.external_forces_n[3 * static_cast<std::size_t>(f.nodes[a]) + k] += force[k] / f.count;
+    }
+    SolvedState s;
+    s.solve = solve_ground_truth_state(m, loads, 4, "insufflation");
+    s.u = s.solve.displacement_mm;
     s.pressure_pa = pressure_pa;
     return s;
 }
@@ -701,17 +496,6 @@ LandmarkSet with_noise(const LandmarkSet& set, double sigma, std::uint64_t seed)
 }
 
 } // namespace
-
-GroundTruthSolution solve_ground_truth(const TledModel& model, const Loads& loads, const EquilibriumOptions& options, int load_steps,
-                                       bool single_precision, const std::vector<std::int32_t>& surface_nodes, const std::string& what,
-                                       const std::vector<double>* initial)
-{
-    if (load_steps < 1) fail("ground truth for {}: {} load steps", what, load_steps);
-    if (initial && initial->size() != 3 * model.node_count())
-        fail("ground truth for {}: initial displacement has {} values for {} nodes", what, initial->size(), model.node_count());
-    return single_precision ? solve_with<float>(model, loads, options, load_steps, surface_nodes, what, initial)
-                            : solve_with<double>(model, loads, options, load_steps, surface_nodes, what, initial);
-}
 
 namespace {
 
@@ -786,28 +570,58 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
     report(0.03, "ground-truth mesh");
     auto t = std::chrono::steady_clock::now();
     GroundTruth gt = build_ground_truth(p, spec);
-    const auto deforming = [&](std::int32_t l) { return gt.tissues.find(l) != nullptr; };
     const auto is_liver = [&](std::int32_t l) { return p.roles.is_liver_tissue(l); };
     timings["ground_truth_model_s"] = seconds_since(t);
+    logger()->info("ground truth: {} model, {} nodes, {} tetrahedra (dihedral angles {:.1f}–{:.1f}°){}", gt.body.name, gt.body.mesh.node_count(),
+                   gt.body.mesh.cell_count(), gt.body.quality.min_dihedral_deg, gt.body.quality.max_dihedral_deg,
+                   gt.organs ? fmt::format("; organs alone {} tetrahedra", gt.organs->mesh.cell_count()) : std::string());
 
     report(0.05, "landmarks");
     t = std::chrono::steady_clock::now();
     const LandmarkSet rest_landmarks = pick_landmarks(p.labels, p.roles);
-    std::vector<Vec3> landmark_points;
-    for (const auto& l : rest_landmarks) landmark_points.push_back(l.position);
-    const auto landmark_cells = embed_in_grid_mesh(gt.mesh, landmark_points);
-    for (std::size_t l = 0; l < rest_landmarks.size(); ++l)
-        if (!landmark_cells[l].inside && landmark_cells[l].distance_mm > 1.5 * gt.cell_size.maxCoeff())
-            fail("landmark {} lies {:.2f} mm outside the ground-truth mesh", rest_landmarks[l].name, landmark_cells[l].distance_mm);
     const auto notch_x = find_margin_notch_x(p.labels, p.roles);
-    const BoundarySurface liver_surface = liver_boundary(gt.mesh, is_liver, notch_x);
+    // Per ground-truth model: where the landmarks sit, and the liver's labelled boundary.
+    struct ModelView {
+        const GroundTruthModel* model;
+        std::vector<NodeEmbedding> landmark_cells;
+        BoundarySurface liver_surface;
+    };
+    const auto view_of = [&](const GroundTruthModel& m) {
+        return ModelView{&m, embed_points(m.mesh, rest_landmarks, 1.5 * m.organ_cell_mm, m.name + " mesh"), liver_boundary(m.mesh, is_liver, notch_x)};
+    };
+    const ModelView body_view = view_of(gt.body);
+    const std::optional<ModelView> organ_view = gt.organs ? std::optional<ModelView>(view_of(*gt.organs)) : std::nullopt;
+    const ModelView& insufflation_view = organ_view ? *organ_view : body_view;
     timings["landmarks_s"] = seconds_since(t);
+
+    json calculix = {{"run", false}};
+    if (spec.calculix_validation && !calculix_available()) {
+        calculix["reason"] = "ccx (Debian calculix-ccx) is not installed";
+    } else if (spec.calculix_validation) {
+        report(0.06, "CalculiX validation");
+        t = std::chrono::steady_clock::now();
+        std::int32_t gel = -1, inclusion = -1;
+        for (const auto& tissue : gt.tissues.tissues) {
+            if (p.roles.body.count(tissue.label) && gel < 0) gel = tissue.label;
+            if (p.roles.liver.count(tissue.label) && inclusion < 0) inclusion = tissue.label;
+        }
+        if (gel < 0) gel = inclusion; // organs only: a block of parenchyma
+        for (const auto& tissue : gt.tissues.tissues)
+            if (gel == inclusion && tissue.label != gel) inclusion = tissue.label;
+        // Its files go to a scratch folder inside the staged dataset, removed before the dataset appears.
+        const fs::path work = root / ".calculix";
+        const CalculixValidation v = validate_ground_truth_against_calculix(gt.tissues, gel, inclusion, work);
+        fs::remove_all(work);
+        calculix = {{"run", true}, {"relative_rms", v.relative_rms}, {"calculix_peak_displacement_mm", v.peak_mm}, {"case", v.description}};
+        logger()->info("ground truth vs CalculiX: RMS difference {:.3f} % of the peak displacement {:.2f} mm", 100 * v.relative_rms, v.peak_mm);
+        timings["calculix_validation_s"] = seconds_since(t);
+    }
 
     // The experiment's states.
     std::vector<CompressionSpec> compressions = spec.compressions;
     const auto& g = p.labels.geometry;
     const double image_length = g.spacing.cwiseProduct(Vec3(double(g.size[0]), double(g.size[1]), double(g.size[2]))).norm();
-    if (compressions.empty()) compressions = default_compressions(p, spec, liver_lo, liver_hi, image_length);
+    if (compressions.empty()) compressions = default_compressions(p, spec, liver_lo, liver_hi, image_length, gt.body.name == "body");
     double parenchyma_e = 0.0;
     for (const auto& tissue : gt.tissues.tissues)
         if (p.roles.liver.count(tissue.label)) parenchyma_e = std::max(parenchyma_e, tissue.young_modulus_pa);
@@ -828,28 +642,49 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
         roles[name] = *set;
     manifest["label_roles"] = roles;
     manifest["material_set"] = to_string(spec.materials);
+    // The ground truth's materials: for reports only — no registration command reads them.
     json tissues = json::array();
-    for (const auto& tissue : gt.tissues.tissues)
+    for (const auto& tissue : gt.tissues.tissues) {
+        const ElasticMaterial m = material_from_tissue(tissue);
         tissues.push_back({{"label", tissue.label}, {"name", tissue.name}, {"young_modulus_pa", tissue.young_modulus_pa},
-                           {"poisson_ratio", tissue.poisson_ratio}, {"density_kg_m3", tissue.density_kg_m3}});
-    manifest["tissues"] = tissues;
-    write_tissue_table(root / "tissues.yaml", gt.tissues);
-    manifest["tissues_file"] = "tissues.yaml";
-    const auto& grid = *gt.mesh.grid;
+                           {"poisson_ratio", tissue.poisson_ratio}, {"density_kg_m3", tissue.density_kg_m3},
+                           {"mooney_rivlin_c10_pa", (0.5 * m.mu_mpa - m.c01_mpa) * 1e6}, {"mooney_rivlin_c01_pa", m.c01_mpa * 1e6},
+                           {"mooney_rivlin_d1_per_pa", 2.0 / (m.kappa_mpa * 1e6)}});
+    }
+    write_tissue_table(root / "ground_truth_tissues.yaml", gt.tissues);
+    manifest["tissues_file"] = "ground_truth_tissues.yaml";
+    const auto describe = [&](const GroundTruthModel& m) {
+        const auto& q = m.quality;
+        return json{{"nodes", m.mesh.node_count()}, {"elements", m.mesh.cell_count()}, {"support", m.support_description},
+                    {"quality", {{"min_dihedral_deg", q.min_dihedral_deg}, {"max_dihedral_deg", q.max_dihedral_deg},
+                                 {"cells_below_10_deg", q.below_10_deg}, {"min_radius_ratio", q.min_radius_ratio},
+                                 {"mean_radius_ratio", q.mean_radius_ratio}, {"min_edge_mm", q.min_edge_mm},
+                                 {"mean_edge_mm", q.mean_edge_mm}, {"max_edge_mm", q.max_edge_mm}}}};
+    };
+    const auto& gm = spec.ground_truth_mesh;
+    std::vector<std::string> simulated;
+    for (const auto& tissue : gt.tissues.tissues) simulated.push_back(p.roles.role_of(tissue.label));
+    simulated.erase(std::unique(simulated.begin(), simulated.end()), simulated.end());
     manifest["ground_truth"] = {
-        {"model", "TLED, Neo-Hookean, uniform-strain hexahedra with hourglass control; tissues share nodes (no coupling)"},
-        {"grid_dims", json::array({grid.dims[0], grid.dims[1], grid.dims[2]})},
-        {"cell_size_mm", to_json(grid.cell_size)},
-        {"liver_grid_requested", json::array({spec.ground_truth_grid[0], spec.ground_truth_grid[1], spec.ground_truth_grid[2]})},
-        {"nodes", gt.mesh.node_count()},
-        {"elements", gt.mesh.cell_count()},
-        {"fixed_nodes", gt.fixed_nodes.size()},
-        {"pilot_grid_dims", gt.pilot ? json::array({gt.pilot->mesh.grid->dims[0], gt.pilot->mesh.grid->dims[1], gt.pilot->mesh.grid->dims[2]}) : json()},
-        {"support", "organ surface faces facing posterior (outward normal y > 0.5) are fixed"},
-        {"precision", spec.single_precision ? "float" : "double"},
-        {"equilibrium", {{"displacement_tolerance_mm", spec.equilibrium.displacement_tolerance_mm},
-                         {"residual_tolerance", spec.equilibrium.residual_tolerance},
-                         {"criterion", "estimated distance to equilibrium and largest free residual / largest internal force"}}}};
+        {"note", "a different model from every model physreg registers with (those: uniform one-point hexahedra, Neo-Hookean, "
+                 "nu 0.49, liver only, literature moduli); registration commands never read this block"},
+        {"simulated_tissues", simulated},
+        {"tissues", tissues},
+        {"material_ranges", gt.material_ranges},
+        {"element", "linear tetrahedra (4 nodes, one Gauss point), conforming to every tissue interface, CGAL Mesh_3"},
+        {"meshing", {{"organ_cell_mm", gm.organ_cell_mm}, {"kidney_cell_mm", gm.kidney_cell_mm}, {"body_cell_mm", gm.body_cell_mm},
+                     {"facet_size_mm", gm.facet_mm}, {"facet_distance_mm", gm.facet_distance_mm}, {"seed", spec.seed}}},
+        {"material_law", "compressible Mooney-Rivlin: C10 (I1bar - 3) + C01 (I2bar - 3) + (J - 1)^2 / D1"},
+        {"contact", {{"tool", "rigid, frictionless; augmented Lagrangian on the smooth skin nodes, penetration tolerance " +
+                                  fmt::format("{} mm", ground_truth_penetration_tolerance_mm)},
+                     {"organs_gel", "tied (shared nodes): the phantom's organs are cast into the gel, which bonds to them"}}},
+        {"solver", {{"method", "Newton (exact tangent by automatic differentiation, CHOLMOD), load steps with halving"},
+                    {"residual_tolerance", ground_truth_residual_tolerance},
+                    {"criterion", "largest free nodal residual / largest internal nodal force"},
+                    {"load_step_mm", spec.load_step_mm}}},
+        {"models", {{gt.body.name, describe(gt.body)}}},
+        {"calculix_validation", calculix}};
+    if (gt.organs) manifest["ground_truth"]["models"]["organs"] = describe(*gt.organs);
     manifest["landmarks"] = {{"count", rest_landmarks.size()},
                              {"surface", std::count_if(rest_landmarks.begin(), rest_landmarks.end(), [](const Landmark& l) { return l.type == LandmarkType::surface; })},
                              {"noise_sigma_mm", spec.landmark_noise_mm},
@@ -865,13 +700,25 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
             if (p.roles.body.count(p.labels.labels[v])) sum += intensity.values[v], ++n;
         return n ? sum / static_cast<double>(n) : 0.0;
     }();
-    const std::uint16_t fill_label = p.roles.body.empty() ? 0 : static_cast<std::uint16_t>(*p.roles.body.begin());
-    const double extension_mm = 1.5 * gt.cell_size.maxCoeff();
+    const double air_intensity = [&] {
+        double sum = 0;
+        std::int64_t n = 0;
+        for (std::size_t v = 0; v < p.labels.labels.size(); ++v)
+            if (p.labels.labels[v] == 0) sum += intensity.values[v], ++n;
+        return n ? sum / static_cast<double>(n) : 0.0;
+    }();
+    const std::uint16_t body_label = p.roles.body.empty() ? 0 : static_cast<std::uint16_t>(*p.roles.body.begin());
+    const double extension_mm = 1.5 * spec.ground_truth_mesh.facet_mm;
 
     json states = json::array();
     const int state_count = 1 + static_cast<int>(compressions.size()) + (pressure > 0 ? 1 : 0);
     int state_index = 0;
-    auto write_state = [&](const std::string& name, const std::string& kind, const SolvedState* solved) {
+    auto write_state = [&](const std::string& name, const std::string& kind, const SolvedState* solved, const ModelView& view) {
+        const VolumeMesh& mesh = view.model->mesh;
+        const auto deforming = [&](std::int32_t l) { return view.model->labels.count(l) > 0; };
+        // Voxels a deforming tissue leaves: gel when the gel stays, air when the gel moves too.
+        const bool gel_moves = deforming(body_label);
+        const std::uint16_t fill_label = gel_moves ? 0 : body_label;
         const double f0 = 0.08 + 0.92 * state_index / state_count;
         const std::string dir = name == "rest" ? "rest" : "states/" + name;
         fs::create_directories(root / dir);
@@ -879,19 +726,19 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
         s["name"] = name;
         s["kind"] = kind;
         json files;
-        const std::vector<double> zero(3 * gt.mesh.node_count(), 0.0);
+        const std::vector<double> zero(3 * mesh.node_count(), 0.0);
         const std::vector<double>& u = solved ? solved->u : zero;
         LabelVolume labels = p.labels;
         ScalarImage image = intensity;
         if (solved) {
             report(f0 + 0.6 / state_count, name + ": images");
-            const InverseMap map = rasterize_inverse_map(gt.mesh, u, g, extension_mm);
+            const InverseMap map = rasterize_inverse_map(mesh, u, g, extension_mm);
             labels = warp_labels(p.labels, map, deforming, fill_label);
-            image = warp_intensity(intensity, p.labels, labels, map, deforming, static_cast<float>(fill_intensity));
+            image = warp_intensity(intensity, p.labels, labels, map, deforming, static_cast<float>(gel_moves ? air_intensity : fill_intensity));
             if (solved->tool) paint_tool(labels, image, *solved->tool, solved->compression.direction.normalized(), deforming);
             files["inverse_displacement"] = write_file(root, dir + "/inverse_displacement.nii.gz",
                                                        [&](const fs::path& f) { write_displacement_field(f, map.field); });
-            const SampledField forward = sample_displacement_field(gt.mesh, u, g);
+            const SampledField forward = sample_displacement_field(mesh, u, g);
             files["displacement"] = write_file(root, dir + "/displacement.nii.gz",
                                                [&](const fs::path& f) { write_displacement_field(f, forward.field); });
         }
@@ -899,17 +746,17 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
         files["intensity"] = write_file(root, dir + "/intensity.nii.gz", [&](const fs::path& f) { write_scalar_image(f, image); });
         MeshData data;
         data.point_data.push_back({"displacement", 3, u});
-        files["mesh"] = write_file(root, dir + "/mesh.vtu", [&](const fs::path& f) { write_vtu(f, gt.mesh, data); });
-        const LandmarkSet landmarks = solved ? move_landmarks(rest_landmarks, landmark_cells, gt.mesh, u) : rest_landmarks;
+        files["mesh"] = write_file(root, dir + "/mesh.vtu", [&](const fs::path& f) { write_vtu(f, mesh, data); });
+        const LandmarkSet landmarks = solved ? move_landmarks(rest_landmarks, view.landmark_cells, mesh, u) : rest_landmarks;
         files["landmarks"] = write_file(root, dir + "/landmarks.csv", [&](const fs::path& f) { write_landmarks(f, landmarks); });
         files["landmarks_noisy"] = write_file(root, dir + "/landmarks_noisy.csv", [&](const fs::path& f) {
             write_landmarks(f, with_noise(landmarks, spec.landmark_noise_mm, mix_seed(spec.seed, "landmarks/" + name)));
         });
-        files["liver_surface"] = write_file(root, dir + "/liver_surface.ply", [&](const fs::path& f) { write_boundary_ply(f, gt.mesh, u, liver_surface); });
+        files["liver_surface"] = write_file(root, dir + "/liver_surface.ply", [&](const fs::path& f) { write_boundary_ply(f, mesh, u, view.liver_surface); });
         json surfaces = json::object();
         if (solved) {
             for (const int percent : spec.surface_percentages) {
-                const auto cloud = visible_surface_patch(gt.mesh, u, liver_surface, percent / 100.0, Vec3::UnitY(), spec.surface_noise_mm,
+                const auto cloud = visible_surface_patch(mesh, u, view.liver_surface, percent / 100.0, Vec3::UnitY(), spec.surface_noise_mm,
                                                          mix_seed(spec.seed, fmt::format("surface/{}/{}", name, percent)));
                 const std::string stem = fmt::format("{}/partial_surface_{:03d}", dir, percent);
                 surfaces[std::to_string(percent)] = {
@@ -930,17 +777,20 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
         } else if (solved) {
             title += fmt::format(": PRESSURE {:.0f} PA", solved->pressure_pa);
         }
-        if (solved) title += fmt::format(", MAX DISPL. {:.1f} MM", solved->max_displacement_mm);
+        if (solved) title += fmt::format(", MAX DISPL. {:.1f} MM", solved->solve.max_displacement_mm);
         figure.title = title;
         figure.pixels_per_mm = std::clamp(600.0 / (g.spacing.x() * g.size[0]), 0.5, 4.0);
         const Canvas canvas = render_orthogonal_slices(image, labels, p.roles, landmarks, {}, figure);
         files["picture"] = write_file(root, dir + "/slices.png", [&](const fs::path& f) { write_png(f, canvas.image()); });
         s["files"] = files;
         if (solved) {
-            s["max_displacement_mm"] = solved->max_displacement_mm;
-            s["iterations"] = solved->iterations;
-            s["pilot_iterations"] = solved->pilot_iterations;
-            s["max_node_penetration_mm"] = solved->max_penetration_mm;
+            s["max_displacement_mm"] = solved->solve.max_displacement_mm;
+            s["ground_truth_model"] = view.model->name;
+            s["load_steps"] = solved->solve.load_steps;
+            s["newton_iterations"] = solved->solve.newton_iterations;
+            s["contact_updates"] = solved->solve.contact_updates;
+            s["worst_residual_ratio"] = solved->solve.worst_residual_ratio;
+            s["max_node_penetration_mm"] = solved->solve.max_penetration_mm;
             if (solved->tool) {
                 const auto& c = solved->compression;
                 s["tool"] = {{"shape", shape_name(solved->tool->shape)}, {"radius_mm", solved->tool->radius_mm},
@@ -958,25 +808,26 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
         ++state_index;
     };
 
-    write_state("rest", "rest", nullptr);
+    write_state("rest", "rest", nullptr, body_view);
     for (const auto& c : compressions) {
         report(0.08 + 0.92 * state_index / state_count, "compression " + c.name + ": solving");
         t = std::chrono::steady_clock::now();
         const SolvedState solved = solve_compression(gt, spec, p, c);
-        timings["solve_" + c.name + "_s"] = solved.seconds;
-        logger()->info("compression {}: depth {} mm, {} iterations, {:.1f} s, max displacement {:.2f} mm", c.name, c.depth_mm,
-                       solved.iterations, solved.seconds, solved.max_displacement_mm);
-        write_state(c.name, "compression", &solved);
+        timings["solve_" + c.name + "_s"] = solved.solve.seconds;
+        logger()->info("compression {}: depth {} mm on the {}, {} load steps, {} Newton iterations, {:.1f} s, max displacement {:.2f} mm",
+                       c.name, c.depth_mm, gt.body.name == "body" ? "skin" : "organ", solved.solve.load_steps, solved.solve.newton_iterations,
+                       solved.solve.seconds, solved.solve.max_displacement_mm);
+        write_state(c.name, "compression", &solved, body_view);
         timings["state_" + c.name + "_s"] = seconds_since(t);
     }
     if (pressure > 0) {
         report(0.08 + 0.92 * state_index / state_count, "insufflation: solving");
         t = std::chrono::steady_clock::now();
-        const SolvedState solved = solve_insufflation(gt, spec, pressure);
-        timings["solve_insufflation_s"] = solved.seconds;
-        logger()->info("insufflation: {:.0f} Pa, {} iterations, {:.1f} s, max displacement {:.2f} mm", pressure, solved.iterations,
-                       solved.seconds, solved.max_displacement_mm);
-        write_state("insufflation", "insufflation", &solved);
+        const SolvedState solved = solve_insufflation(gt, pressure);
+        timings["solve_insufflation_s"] = solved.solve.seconds;
+        logger()->info("insufflation: {:.0f} Pa on the {} model, {} Newton iterations, {:.1f} s, max displacement {:.2f} mm", pressure,
+                       gt.insufflation_model().name, solved.solve.newton_iterations, solved.solve.seconds, solved.solve.max_displacement_mm);
+        write_state("insufflation", "insufflation", &solved, insufflation_view);
         timings["state_insufflation_s"] = seconds_since(t);
         std::vector<std::string> organs;
         for (const auto* set : {&p.roles.liver, &p.roles.kidney})
@@ -1021,8 +872,7 @@ PhantomDataset read_phantom_dataset(const fs::path& directory)
         d.generator_version = m.at("generator").at("version").get<std::string>();
         d.seed = m.at("generator").at("seed").get<std::uint64_t>();
         d.preset = m.at("generator").at("preset").get<std::string>();
-        const auto requested = m.at("ground_truth").at("liver_grid_requested").get<std::vector<std::int64_t>>();
-        if (requested.size() == 3) d.ground_truth_grid = {requested[0], requested[1], requested[2]};
+        d.ground_truth_element = m.at("ground_truth").at("element").get<std::string>();
         const auto& r = m.at("label_roles");
         d.roles.body = r.at("body").get<std::set<std::int32_t>>();
         d.roles.liver = r.at("liver").get<std::set<std::int32_t>>();

@@ -15,6 +15,10 @@
 //   Ψ = μ |F − R|² + λ/2 (tr(RᵀF) − 3)²,  P = 2μ (F − R) + λ (tr(RᵀF) − 3) R.
 // For a linear tetrahedron V P b_a is exactly the classical element force R K₀ (Rᵀx − X); unlike
 // the small-strain law it gives zero force under any rigid rotation.
+// Compressible Mooney–Rivlin (CalculiX's *HYPERELASTIC, MOONEY-RIVLIN with D1 = 2/κ), the law of the
+// phantom's ground truth (implicit solvers only):
+//   Ψ = C10 (Ī₁ − 3) + C01 (Ī₂ − 3) + κ/2 (J − 1)²,  Ī₂ = J^(-4/3) ½ (I₁² − tr C²),
+// with C10 + C01 = μ/2 (the initial shear modulus is μ) and C01 = c01_fraction · μ/2.
 #include "physreg/model/tissue_table.hpp"
 
 #include <Eigen/Core>
@@ -26,8 +30,8 @@
 
 namespace physreg {
 
-enum class MaterialLaw { neo_hookean, st_venant_kirchhoff, linear_elastic, corotational };
-/// "neo-hookean", "svk", "linear", "corotational"
+enum class MaterialLaw { neo_hookean, st_venant_kirchhoff, linear_elastic, corotational, mooney_rivlin };
+/// "neo-hookean", "svk", "linear", "corotational", "mooney-rivlin"
 MaterialLaw parse_material_law(const std::string& text);
 std::string to_string(MaterialLaw law);
 
@@ -36,6 +40,7 @@ struct ElasticMaterial {
     double lambda_mpa = 0.0;  ///< first Lamé parameter
     double kappa_mpa = 0.0;   ///< bulk modulus
     double density_t_mm3 = 0.0;
+    double c01_mpa = 0.0;     ///< Mooney–Rivlin: the Ī₂ coefficient (C10 = μ/2 − C01)
 
     double dilatational_modulus_mpa() const { return lambda_mpa + 2.0 * mu_mpa; }
     /// Dilatational wave speed, mm/s.
@@ -124,6 +129,48 @@ inline Real corotational_stress(Real mu, Real lambda, const Real* f, Real* p)
     }
     for (int k = 0; k < 9; ++k) p[k] = Real(2) * mu * (f[k] - r[k]) + lambda * excess * r[k];
     return mu * distance + Real(0.5) * lambda * excess * excess;
+}
+
+/// The Mooney–Rivlin P (MPa, written to `p`) at F; returns the energy density Ψ (MPa). Templated on
+/// the scalar so that automatic differentiation gives the exact tangent. det F ≤ 0: returns NaN.
+template <typename Real>
+inline Real mooney_rivlin_stress(double c10, double c01, double kappa, const Real* f, Real* p)
+{
+    using std::pow;
+    const Real j = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) + f[2] * (f[3] * f[7] - f[4] * f[6]);
+    if (!(j > 0.0)) {
+        for (int k = 0; k < 9; ++k) p[k] = Real(std::numeric_limits<double>::quiet_NaN());
+        return Real(std::numeric_limits<double>::quiet_NaN());
+    }
+    // C = Fᵀ F as C00 C11 C22 C01 C12 C02
+    Real cm[6];
+    cm[0] = f[0] * f[0] + f[3] * f[3] + f[6] * f[6];
+    cm[1] = f[1] * f[1] + f[4] * f[4] + f[7] * f[7];
+    cm[2] = f[2] * f[2] + f[5] * f[5] + f[8] * f[8];
+    cm[3] = f[0] * f[1] + f[3] * f[4] + f[6] * f[7];
+    cm[4] = f[1] * f[2] + f[4] * f[5] + f[7] * f[8];
+    cm[5] = f[0] * f[2] + f[3] * f[5] + f[6] * f[8];
+    const Real i1 = cm[0] + cm[1] + cm[2];
+    const Real tr_c2 = cm[0] * cm[0] + cm[1] * cm[1] + cm[2] * cm[2] + Real(2.0) * (cm[3] * cm[3] + cm[4] * cm[4] + cm[5] * cm[5]);
+    const Real i2 = Real(0.5) * (i1 * i1 - tr_c2);
+    const Real inv_j2 = Real(1.0) / (j * j);
+    const Real ci[6] = {(cm[1] * cm[2] - cm[4] * cm[4]) * inv_j2, (cm[0] * cm[2] - cm[5] * cm[5]) * inv_j2,
+                        (cm[0] * cm[1] - cm[3] * cm[3]) * inv_j2, (cm[5] * cm[4] - cm[3] * cm[2]) * inv_j2,
+                        (cm[3] * cm[5] - cm[0] * cm[4]) * inv_j2, (cm[3] * cm[4] - cm[1] * cm[5]) * inv_j2};
+    const Real j23 = pow(j, -2.0 / 3.0), j43 = j23 * j23;
+    // S = 2C10 J^(-2/3) (I − I₁/3 C⁻¹) + 2C01 J^(-4/3) (I₁ I − C − ⅔ I₂ C⁻¹) + κ J (J − 1) C⁻¹
+    const Real a1 = Real(2.0 * c10) * j23, a2 = Real(2.0 * c01) * j43;
+    const Real inverse_coefficient = -a1 * i1 / Real(3.0) - a2 * Real(2.0 / 3.0) * i2 + Real(kappa) * j * (j - Real(1.0));
+    Real s[6];
+    for (int k = 0; k < 6; ++k) s[k] = inverse_coefficient * ci[k] - a2 * cm[k];
+    for (int k = 0; k < 3; ++k) s[k] += a1 + a2 * i1;
+    for (int r = 0; r < 3; ++r) {
+        const Real f0 = f[3 * r], f1 = f[3 * r + 1], f2 = f[3 * r + 2];
+        p[3 * r + 0] = f0 * s[0] + f1 * s[3] + f2 * s[5];
+        p[3 * r + 1] = f0 * s[3] + f1 * s[1] + f2 * s[4];
+        p[3 * r + 2] = f0 * s[5] + f1 * s[4] + f2 * s[2];
+    }
+    return Real(c10) * (j23 * i1 - Real(3.0)) + Real(c01) * (j43 * i2 - Real(3.0)) + Real(0.5 * kappa) * (j - Real(1.0)) * (j - Real(1.0));
 }
 
 /// First Piola–Kirchhoff stress P (MPa) for F (row-major 3×3), written to `p`. Returns J = det F.

@@ -16,6 +16,8 @@ struct Tissue {
     double young_modulus_pa = 0.0;
     double poisson_ratio = 0.0;
     double density_kg_m3 = 1000.0;
+    /// Mooney–Rivlin law only: C01 / (C10 + C01), in [0, 1) (0 = Neo-Hookean).
+    double mooney_rivlin_c01_fraction = 0.0;
 };
 
 struct TissueTable {

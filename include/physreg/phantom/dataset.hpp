@@ -10,6 +10,7 @@
 #include "physreg/mechanics/tled_solver.hpp"
 #include "physreg/model/tissue_table.hpp"
 #include "physreg/phantom/abdominal_phantom.hpp"
+#include "physreg/phantom/ground_truth.hpp"
 
 #include <filesystem>
 #include <functional>
@@ -51,45 +52,30 @@ struct PhantomSpec {
     LabelRoles roles = phantom_label_roles(); ///< from-labels: which label is which organ
     std::filesystem::path vessel_mask;        ///< optional: nonzero voxels inside the liver become vessel
     double voxel_mm = 1.0;                    ///< preset image resolution
-    Index3 ground_truth_grid{148, 108, 36};   ///< cells over the liver's bounding box (capped at the image's voxels)
+    /// Seed of everything random: anatomy noise, ground-truth materials, mesh, landmark and surface
+    /// noise. 1 … 4294967295 (CGAL's generator takes 32 bits).
     std::uint64_t seed = 1;
+    /// The literature values the ground-truth moduli are drawn around (ground_truth.hpp).
     MaterialSet materials = MaterialSet::paper000;
-    /// Five positions over the liver when empty; depths (mm) used for them, in order A, B, ….
+    GroundTruthMeshing ground_truth_mesh;
+    double load_step_mm = 2.5;                ///< largest tool travel per Newton load step
+    /// Run the small CalculiX validation of the ground-truth discretisation (needs ccx; the
+    /// manifest says so when it is absent).
+    bool calculix_validation = true;
+    /// Five positions over the liver when empty; depths (mm, travel on the skin from first contact)
+    /// used for them, in order A, B, ….
     std::vector<CompressionSpec> compressions;
-    std::vector<double> depths_mm{10, 12, 10, 8, 10};
+    std::vector<double> depths_mm{20, 25, 20, 15, 22};
     ToolSpec tool;
     std::optional<double> insufflation_pa;    ///< default: 3 % of the parenchyma's Young's modulus; 0 disables
     double landmark_noise_mm = 0.5;
     double surface_noise_mm = 0.5;
     std::vector<int> surface_percentages{50, 40, 30, 20, 10};
-    /// Largest tool travel per relaxation iteration, in smallest-cell sizes (sets the ramp length).
-    double tool_speed_per_cell = 0.01;
-    EquilibriumOptions equilibrium = tight_equilibrium();
-    bool single_precision = false;
-
-    static EquilibriumOptions tight_equilibrium();
     /// The named preset: "cirs057a" (the default) or "small" (4 mm voxels, a coarse ground truth
-    /// and shallow compressions; for tests). Throws Error for an unknown name.
+    /// and shallower compressions; for tests). Throws Error for an unknown name.
     static PhantomSpec preset_spec(const std::string& name);
     void validate() const;
 };
-
-/// The ground-truth solve: static equilibrium by dynamic relaxation in `load_steps` equal load
-/// increments (intermediate ones to 10× the tolerance, the last to `options`), warm-started from
-/// each other. Throws Error naming `what` on inversion, divergence or non-convergence. The
-/// penetration is the deepest `surface_nodes` node inside a tool at the end (mm).
-struct GroundTruthSolution {
-    std::vector<double> displacement_mm;
-    long iterations = 0;
-    double seconds = 0.0;
-    double max_displacement_mm = 0.0;
-    double max_node_penetration_mm = 0.0;
-};
-/// `initial_displacement_mm` (3 per node, optional) starts the relaxation from a pilot solution
-/// (e.g. of a coarser model, interpolated) instead of rest; the loads are then applied at once.
-GroundTruthSolution solve_ground_truth(const TledModel& model, const Loads& loads, const EquilibriumOptions& options, int load_steps,
-                                       bool single_precision, const std::vector<std::int32_t>& surface_nodes, const std::string& what,
-                                       const std::vector<double>* initial_displacement_mm = nullptr);
 
 /// What `physreg phantom` wrote: every path relative to the dataset folder.
 struct DatasetState {
@@ -108,7 +94,7 @@ struct PhantomDataset {
     std::string generator_version;
     std::uint64_t seed = 0;
     std::string preset;
-    Index3 ground_truth_grid{0, 0, 0};             ///< cells over the liver requested for the ground truth
+    std::string ground_truth_element;              ///< e.g. "linear tetrahedra (CGAL Mesh_3), Mooney-Rivlin"
     LabelRoles roles;
     std::string tissues_file;                      ///< relative: the ground-truth model's tissue table
     std::vector<DatasetState> states;              ///< rest first

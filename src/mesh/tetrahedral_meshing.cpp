@@ -1,0 +1,227 @@
+#include "physreg/mesh/tetrahedral_meshing.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Labeled_mesh_domain_3.h>
+#include <CGAL/Mesh_complex_3_in_triangulation_3.h>
+#include <CGAL/Mesh_criteria_3.h>
+#include <CGAL/Mesh_triangulation_3.h>
+#include <CGAL/make_mesh_3.h>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <unordered_map>
+
+namespace physreg {
+
+namespace {
+
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Domain = CGAL::Labeled_mesh_domain_3<Kernel>;
+using Triangulation = CGAL::Mesh_triangulation_3<Domain, CGAL::Default, CGAL::Sequential_tag>::type;
+using Complex = CGAL::Mesh_complex_3_in_triangulation_3<Triangulation>;
+using Criteria = CGAL::Mesh_criteria_3<Triangulation>;
+using Point = Kernel::Point_3;
+
+// The label at a physical point: of the 8 voxel centres around it, the label with the largest sum
+// of trilinear weights (CGAL's labellized trilinear interpolation); outside the image: 0.
+struct LabelAt {
+    const LabelVolume* volume;
+    const std::vector<char>* selected; // per label value: meshed
+    int operator()(const Point& p) const
+    {
+        const auto& g = volume->geometry;
+        const Vec3 c = g.physical_to_index(Vec3(p.x(), p.y(), p.z()));
+        std::int64_t base[3];
+        double t[3];
+        for (int a = 0; a < 3; ++a) {
+            const double f = std::floor(c[a]);
+            base[a] = static_cast<std::int64_t>(f);
+            t[a] = c[a] - f;
+        }
+        std::int32_t best_label = 0, labels[8];
+        double weights[8];
+        int count = 0;
+        for (int corner = 0; corner < 8; ++corner) {
+            std::int64_t ijk[3];
+            double w = 1.0;
+            for (int a = 0; a < 3; ++a) {
+                const int bit = (corner >> a) & 1;
+                ijk[a] = base[a] + bit;
+                w *= bit ? t[a] : 1.0 - t[a];
+            }
+            std::int32_t label = 0;
+            if (ijk[0] >= 0 && ijk[1] >= 0 && ijk[2] >= 0 && ijk[0] < g.size[0] && ijk[1] < g.size[1] && ijk[2] < g.size[2]) {
+                label = volume->at(ijk[0], ijk[1], ijk[2]);
+                if (!(*selected)[static_cast<std::size_t>(label)]) label = 0;
+            }
+            int k = 0;
+            while (k < count && labels[k] != label) ++k;
+            if (k == count) labels[count] = label, weights[count++] = 0.0;
+            weights[k] += w;
+        }
+        double best = -1.0;
+        for (int k = 0; k < count; ++k)
+            if (weights[k] > best || (weights[k] == best && labels[k] < best_label)) best = weights[k], best_label = labels[k];
+        return best_label;
+    }
+};
+
+// Cell size by subdomain (the label of the cell's circumcentre's subdomain).
+struct CellSize {
+    const TetMeshingOptions* options;
+    double operator()(const Point&, int, const Domain::Index& index) const
+    {
+        if (const auto* sub = boost::get<int>(&index)) {
+            const auto it = options->cell_size_mm.find(*sub);
+            if (it != options->cell_size_mm.end()) return it->second;
+        }
+        return options->default_cell_size_mm;
+    }
+};
+
+double dihedral_deg(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d)
+{
+    // Angle at edge ab between faces abc and abd.
+    const Vec3 e = (b - a).normalized();
+    Vec3 u = c - a, v = d - a;
+    u -= u.dot(e) * e;
+    v -= v.dot(e) * e;
+    const double cosine = std::clamp(u.normalized().dot(v.normalized()), -1.0, 1.0);
+    return std::acos(cosine) * 180.0 / M_PI;
+}
+
+} // namespace
+
+void TetMeshingOptions::validate() const
+{
+    const auto positive = [](double v, const char* name) {
+        if (!(std::isfinite(v) && v > 0)) fail("tetrahedral meshing: {} = {} must be finite and > 0", name, v);
+    };
+    positive(default_cell_size_mm, "default_cell_size_mm");
+    positive(facet_size_mm, "facet_size_mm");
+    positive(facet_distance_mm, "facet_distance_mm");
+    for (const auto& [label, size] : cell_size_mm) positive(size, fmt::format("cell_size_mm[{}]", label).c_str());
+    if (!(facet_angle_deg > 0 && facet_angle_deg <= 30))
+        fail("tetrahedral meshing: facet_angle_deg = {} must lie in (0, 30] (CGAL's refinement terminates up to 30°)", facet_angle_deg);
+    if (!(radius_edge_ratio >= 2.0))
+        fail("tetrahedral meshing: radius_edge_ratio = {} must be ≥ 2 (Delaunay refinement cannot guarantee less)", radius_edge_ratio);
+    if (!(exude_seconds >= 0)) fail("tetrahedral meshing: exude_seconds = {} must be ≥ 0", exude_seconds);
+}
+
+VolumeMesh mesh_labels_tetrahedral(const LabelVolume& labels, const TetMeshingOptions& options, const std::string& what)
+{
+    options.validate();
+    labels.geometry.validate(what);
+    std::vector<char> selected(65536, 0);
+    std::int64_t voxels = 0;
+    Vec3 lo = Vec3::Constant(1e300), hi = -lo;
+    const auto& g = labels.geometry;
+    for (std::int64_t k = 0; k < g.size[2]; ++k)
+        for (std::int64_t j = 0; j < g.size[1]; ++j)
+            for (std::int64_t i = 0; i < g.size[0]; ++i) {
+                const auto l = labels.at(i, j, k);
+                if (l == 0 || (!options.labels.empty() && !options.labels.count(l))) continue;
+                selected[l] = 1;
+                ++voxels;
+                const Vec3 x = g.index_to_physical(Vec3(double(i), double(j), double(k)));
+                lo = lo.cwiseMin(x);
+                hi = hi.cwiseMax(x);
+            }
+    if (voxels == 0) fail("{}: no voxel carries a label to mesh", what);
+    const Vec3 margin = 2.0 * g.spacing.cwiseAbs().maxCoeff() * Vec3::Ones();
+    lo -= margin;
+    hi += margin;
+
+    CGAL::Random random(options.seed);
+    const std::function<int(const Point&)> label_at = LabelAt{&labels, &selected};
+    const double error_bound = 1e-6;
+    Domain domain(label_at, CGAL::Bbox_3(lo.x(), lo.y(), lo.z(), hi.x(), hi.y(), hi.z()), error_bound, CGAL::Null_subdomain_index(), &random);
+    namespace params = CGAL::parameters;
+    Criteria criteria(params::facet_angle = options.facet_angle_deg, params::facet_size = options.facet_size_mm,
+                      params::facet_distance = options.facet_distance_mm, params::cell_radius_edge_ratio = options.radius_edge_ratio,
+                      params::cell_size = CellSize{&options});
+    CGAL::get_default_random() = CGAL::Random(options.seed);
+    Complex complex;
+    try {
+        complex = CGAL::make_mesh_3<Complex>(domain, criteria, params::no_perturb(), params::no_exude());
+        if (options.exude_seconds > 0)
+            CGAL::exude_mesh_3(complex, params::time_limit = options.exude_seconds, params::sliver_bound = 12.0);
+    } catch (const std::exception& e) {
+        fail("{}: CGAL Mesh_3 failed: {}", what, e.what());
+    }
+
+    VolumeMesh mesh;
+    mesh.cell_type = CellType::tetrahedron;
+    std::unordered_map<const void*, std::int32_t> id_of;
+    const auto node = [&](Triangulation::Vertex_handle v) {
+        const void* key = &*v;
+        const auto it = id_of.find(key);
+        if (it != id_of.end()) return it->second;
+        const auto& p = v->point().point();
+        const auto id = static_cast<std::int32_t>(mesh.nodes.size());
+        mesh.nodes.emplace_back(p.x(), p.y(), p.z());
+        id_of.emplace(key, id);
+        return id;
+    };
+    for (auto c = complex.cells_in_complex_begin(); c != complex.cells_in_complex_end(); ++c) {
+        std::array<std::int32_t, 4> ids{node(c->vertex(0)), node(c->vertex(1)), node(c->vertex(2)), node(c->vertex(3))};
+        const Vec3 &a = mesh.nodes[ids[0]], &b = mesh.nodes[ids[1]], &cc = mesh.nodes[ids[2]], &d = mesh.nodes[ids[3]];
+        if ((b - a).cross(cc - a).dot(d - a) < 0) std::swap(ids[2], ids[3]); // positive volume
+        mesh.cells.insert(mesh.cells.end(), ids.begin(), ids.end());
+        mesh.cell_labels.push_back(complex.subdomain_index(c));
+    }
+    if (mesh.cell_count() == 0) fail("{}: CGAL made no tetrahedra (are the features smaller than the sizes?)", what);
+    mesh.validate(what);
+    return mesh;
+}
+
+TetrahedronQuality measure_tetrahedra(const VolumeMesh& mesh)
+{
+    if (mesh.cell_type != CellType::tetrahedron) fail("tetrahedron quality: the mesh has {} cells", to_string(mesh.cell_type));
+    TetrahedronQuality q;
+    q.cells = mesh.cell_count();
+    q.nodes = mesh.node_count();
+    q.min_dihedral_deg = 180;
+    q.min_radius_ratio = 1e300;
+    q.min_edge_mm = 1e300;
+    double ratio_sum = 0, edge_sum = 0;
+    std::size_t edges = 0;
+    static constexpr int pairs[6][4] = {{0, 1, 2, 3}, {0, 2, 1, 3}, {0, 3, 1, 2}, {1, 2, 0, 3}, {1, 3, 0, 2}, {2, 3, 0, 1}};
+    for (std::size_t c = 0; c < mesh.cell_count(); ++c) {
+        const auto cell = mesh.cell(c);
+        const Vec3 x[4] = {mesh.nodes[cell[0]], mesh.nodes[cell[1]], mesh.nodes[cell[2]], mesh.nodes[cell[3]]};
+        double smallest = 180;
+        for (const auto& p : pairs) {
+            const double angle = dihedral_deg(x[p[0]], x[p[1]], x[p[2]], x[p[3]]);
+            smallest = std::min(smallest, angle);
+            q.max_dihedral_deg = std::max(q.max_dihedral_deg, angle);
+            const double edge = (x[p[0]] - x[p[1]]).norm();
+            q.min_edge_mm = std::min(q.min_edge_mm, edge);
+            q.max_edge_mm = std::max(q.max_edge_mm, edge);
+            edge_sum += edge;
+            ++edges;
+        }
+        q.min_dihedral_deg = std::min(q.min_dihedral_deg, smallest);
+        if (smallest < 10) ++q.below_10_deg;
+        // r_in = 3V / area; R from the circumcentre formula.
+        const Vec3 a = x[1] - x[0], b = x[2] - x[0], d = x[3] - x[0];
+        const double volume = std::abs(a.dot(b.cross(d))) / 6.0;
+        const double area = 0.5 * ((x[1] - x[0]).cross(x[2] - x[0]).norm() + (x[1] - x[0]).cross(x[3] - x[0]).norm() +
+                                   (x[2] - x[0]).cross(x[3] - x[0]).norm() + (x[2] - x[1]).cross(x[3] - x[1]).norm());
+        const double r_in = 3.0 * volume / area;
+        const Vec3 centre_offset = (a.squaredNorm() * b.cross(d) + b.squaredNorm() * d.cross(a) + d.squaredNorm() * a.cross(b)) /
+                                   (2.0 * a.dot(b.cross(d)));
+        const double ratio = 3.0 * r_in / centre_offset.norm();
+        q.min_radius_ratio = std::min(q.min_radius_ratio, ratio);
+        ratio_sum += ratio;
+    }
+    q.mean_radius_ratio = ratio_sum / static_cast<double>(std::max<std::size_t>(1, q.cells));
+    q.mean_edge_mm = edge_sum / static_cast<double>(std::max<std::size_t>(1, edges));
+    return q;
+}
+
+} // namespace physreg
