@@ -14,6 +14,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <set>
 #include <chrono>
 #include <fstream>
 #include <iostream>
@@ -46,7 +47,7 @@ void add_subcommand_bench(CLI::App& app)
     auto* group = app.add_subcommand("bench", "Benchmarks of the registration pipeline (JSON)");
     group->require_subcommand(1);
     struct Options : CommonOptions {
-        std::string dataset, parameters, database, states = "D,E", output, match = "parameters", blend = "auto";
+        std::string dataset, parameters, database, states = "A,B,C,D,E", held_out = "D,E", output, match = "parameters", blend = "auto";
         ModelOptions model;
         int steps = 20;
     };
@@ -57,7 +58,9 @@ void add_subcommand_bench(CLI::App& app)
     sub->add_option("--parameters", o->parameters, "Parameter file (physreg estimate) the database was built with");
     add_model_options(sub, o->model);
     sub->add_option("--database", o->database, "Enrichment database (physreg enrich build)")->required();
-    sub->add_option("--states", o->states, "Compressions to follow (default D,E: the validation ones)");
+    sub->add_option("--states", o->states, "Compressions to follow (default A,B,C,D,E)");
+    sub->add_option("--held-out", o->held_out, "Which of them are held out (never in the database or the estimation; default D,E): "
+                                               "their TRE is reported apart from the training ones'");
     sub->add_option("--steps", o->steps, "Tool positions from first contact to the final depth (default 20)");
     sub->add_option("--match", o->match, "parameters or field");
     sub->add_option("--blend", o->blend, "auto or a number of blended conditions");
@@ -88,7 +91,9 @@ void add_subcommand_bench(CLI::App& app)
         report["targets"] = {{"coarse_to_fine_ms", 10.0}, {"high_resolution_ms", 100.0}, {"tre_gap_mm", 0.5}};
         ProgressDisplay bar("bench enrich");
         std::vector<double> all_hr, all_c2f, all_coarse, all_synthesis;
-        std::vector<TreReport> tre_hr, tre_c2f;
+        std::vector<TreReport> tre_hr, tre_c2f, tre_hr_held, tre_c2f_held, tre_hr_train, tre_c2f_train;
+        const auto held_names = split_names(o->held_out, "--held-out");
+        const std::set<std::string> held(held_names.begin(), held_names.end());
         for (std::size_t c = 0; c < cases.size(); ++c) {
             const double depth = (cases[c].tool.path.back() - cases[c].tool.path.front()).norm();
             const TrackingRun run = track_compression(loaded.model, coarse, embedding, db, cases[c].tool, loaded.rest_landmarks, o->steps, how, k,
@@ -99,6 +104,8 @@ void add_subcommand_bench(CLI::App& app)
             if (run.last_match.outside_range) logger()->warn("{}: outside the database's range: {}", cases[c].name, run.last_match.range_note);
             tre_hr.push_back(compute_tre(run.high_resolution_landmarks, cases[c].truth, cases[c].name));
             tre_c2f.push_back(compute_tre(run.coarse_to_fine_landmarks, cases[c].truth, cases[c].name));
+            (held.count(cases[c].name) ? tre_hr_held : tre_hr_train).push_back(tre_hr.back());
+            (held.count(cases[c].name) ? tre_c2f_held : tre_c2f_train).push_back(tre_c2f.back());
             const auto& ms_hr = run.high_resolution_ms;
             const auto& ms_c2f = run.coarse_to_fine_ms;
             const auto& it_hr = run.high_resolution_iterations;
@@ -108,6 +115,7 @@ void add_subcommand_bench(CLI::App& app)
             all_coarse.insert(all_coarse.end(), run.coarse_solve_ms.begin(), run.coarse_solve_ms.end());
             all_synthesis.insert(all_synthesis.end(), run.synthesis_ms.begin(), run.synthesis_ms.end());
             report["compressions"][cases[c].name] = {{"depth_mm", depth},
+                                                     {"held_out", held.count(cases[c].name) > 0},
                                                      {"high_resolution", timing_json(ms_hr, it_hr)},
                                                      {"coarse_to_fine", timing_json(ms_c2f, it_c2f)},
                                                      {"coarse_to_fine_split_ms", {{"coarse_equilibrium", mean_of(run.coarse_solve_ms)},
@@ -127,12 +135,21 @@ void add_subcommand_bench(CLI::App& app)
                              {"tre_high_resolution", json::parse(tre_stats_json(hr))},
                              {"tre_coarse_to_fine", json::parse(tre_stats_json(c2f))},
                              {"tre_gap_mm", c2f.all.mean_mm - hr.all.mean_mm},
+                             {"training", {{"states", tre_hr_train.size()},
+                                           {"tre_high_resolution", json::parse(tre_stats_json(pool_tre(tre_hr_train)))},
+                                           {"tre_coarse_to_fine", json::parse(tre_stats_json(pool_tre(tre_c2f_train)))}}},
+                             {"held_out", {{"states", tre_hr_held.size()},
+                                           {"tre_high_resolution", json::parse(tre_stats_json(pool_tre(tre_hr_held)))},
+                                           {"tre_coarse_to_fine", json::parse(tre_stats_json(pool_tre(tre_c2f_held)))}}},
                              {"meets_coarse_to_fine_target", mean_c2f <= 10.0},
                              {"meets_high_resolution_target", mean_hr <= 100.0},
                              {"meets_tre_target", c2f.all.mean_mm - hr.all.mean_mm <= 0.5}};
         std::cerr << fmt::format("bench enrich ({}, {} threads): high resolution {:.1f} ms/update, coarse-to-fine {:.1f} ms/update, speed-up "
-                                 "{:.1f}×; TRE at the final depth {:.3f} vs {:.3f} mm\n",
-                                 o->model.solver, omp_get_max_threads(), mean_hr, mean_c2f, mean_hr / mean_c2f, hr.all.mean_mm, c2f.all.mean_mm);
+                                 "{:.1f}×; TRE at the final depth (high resolution vs coarse-to-fine): training {:.3f} vs {:.3f} mm, "
+                                 "held-out {:.3f} vs {:.3f} mm\n",
+                                 o->model.solver, omp_get_max_threads(), mean_hr, mean_c2f, mean_hr / mean_c2f,
+                                 pool_tre(tre_hr_train).all.mean_mm, pool_tre(tre_c2f_train).all.mean_mm, pool_tre(tre_hr_held).all.mean_mm,
+                                 pool_tre(tre_c2f_held).all.mean_mm);
         if (!o->output.empty())
             write_atomically(o->output, [&](const fs::path& tmp) { std::ofstream(tmp) << report.dump(2) << "\n"; });
         if (o->json) std::cout << report.dump(2) << std::endl;

@@ -1,8 +1,9 @@
 // physreg demo: the main job. On the built-in CIRS-057A-like phantom it runs paper 000 end to end:
-// phantom dataset → coupling estimation (train A, B, C) → detail enrichment database → registration
-// of the validation compressions (D, E) with the homogeneous, the high-resolution heterogeneous and
-// the coarse-to-fine model → TRE and time per update beside paper 000's figures, VTU files and PNG
-// figures. --quick does the same on the small preset (tests).
+// phantom dataset (the body ground truth) → coupling estimation (train A, B, C) → detail enrichment
+// database (training positions only) → registration of the training and the held-out compressions
+// (D, E) with the homogeneous, the high-resolution heterogeneous and the coarse-to-fine model and a
+// rigid baseline → TRE (training and held-out apart) and time per update beside paper 000's
+// figures, VTU files and PNG figures. --quick does the same on the small preset (tests).
 #include "cli_support.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -157,6 +158,7 @@ void add_subcommand_demo(CLI::App& app)
         std::string output = "demo-out";
         bool quick = false, rebuild = false;
         int evaluations = 0;
+        std::uint64_t seed = 1;
     };
     auto o = std::make_shared<Options>();
     auto* sub = app.add_subcommand("demo", "The main job: phantom → estimation → enrichment database → registration of the validation "
@@ -165,6 +167,7 @@ void add_subcommand_demo(CLI::App& app)
     sub->add_flag("--quick", o->quick, "Small preset and grids (≈ 1 min; for tests)");
     sub->add_flag("--rebuild-phantom", o->rebuild, "Rebuild the phantom dataset even if OUTPUT/phantom holds one from an earlier run");
     sub->add_option("--max-evaluations", o->evaluations, "Estimation budget (default 12; quick 4)");
+    sub->add_option("--seed", o->seed, "Seed of the phantom (its ground-truth materials, mesh and noise; default 1)");
     sub->add_flag("--json", o->json, "Print the JSON summary on stdout");
     sub->callback([o] {
         namespace fs = std::filesystem;
@@ -181,9 +184,9 @@ void add_subcommand_demo(CLI::App& app)
         const std::string preset = o->quick ? "small" : "cirs057a";
         const Index3 grid = o->quick ? Index3{36, 27, 12} : Index3{74, 54, 18};
         const Index3 coarse_grid = o->quick ? Index3{12, 9, 6} : Index3{24, 18, 18};
-        // Depths up to the validation compressions' (8 and 10 mm): deeper ones invert elements under the
-        // tool at some positions (see docs/phantom.md, compression depth).
-        const std::vector<double> depths = o->quick ? std::vector<double>{3, 6, 9} : std::vector<double>{2, 4, 6, 8, 10};
+        // Tool travel on the skin from first contact, as in the phantom's compressions (up to 25 mm; the
+        // liver model meets the tool only once the gel above the liver is crossed).
+        const std::vector<double> depths = o->quick ? std::vector<double>{4, 8, 12, 15} : std::vector<double>{5, 10, 15, 20, 25};
         const int evaluations = o->evaluations > 0 ? o->evaluations : (o->quick ? 4 : 12);
         const int track_steps = o->quick ? 5 : 20;
         const std::vector<std::string> train{"A", "B", "C"}, validation{"D", "E"};
@@ -194,12 +197,14 @@ void add_subcommand_demo(CLI::App& app)
         step(2, "phantom dataset (" + preset + " preset) → phantom/");
         const fs::path phantom_dir = dir / "phantom";
         // The demo's phantom is `physreg phantom`'s default: the body ground truth (docs/phantom.md).
-        const PhantomSpec phantom_spec = PhantomSpec::preset_spec(preset);
+        PhantomSpec phantom_spec = PhantomSpec::preset_spec(preset);
+        phantom_spec.seed = o->seed;
+        phantom_spec.validate();
         bool reuse = false;
         if (!o->rebuild && fs::exists(phantom_dir / "manifest.json")) {
             try {
                 const PhantomDataset old = read_phantom_dataset(phantom_dir);
-                reuse = old.preset == preset && old.seed == 1 && old.generator_version == VERSION;
+                reuse = old.preset == preset && old.seed == o->seed && old.generator_version == VERSION;
             } catch (const Error&) {
                 reuse = false;
             }
@@ -235,14 +240,15 @@ void add_subcommand_demo(CLI::App& app)
                                json({{"objective_mm", fit.objective_mm}, {"evaluations", fit.history.size()}}).dump());
         const double estimate_s = seconds_since(t);
 
-        step(4, "detail enrichment database: positions A–E × depths, fine and coarse models → enrichment.phe");
+        step(4, "detail enrichment database: training positions A, B, C × depths, fine and coarse models → enrichment.phe");
         t = clock::now();
         const LiverModel fine = build_liver_model(rest_labels, dataset.roles, fit.fitted, "phantom rest labels");
         std::vector<NodeEmbedding> embedding;
         const LiverModel coarse = coarsen_liver_model(fine, coarse_grid, &embedding);
         EnrichmentPlan plan;
-        for (const auto& s : dataset.states)
-            if (s.tool) plan.positions.push_back({s.name, s.tool->path.front()}), plan.direction = (s.tool->path.back() - s.tool->path.front()).normalized();
+        // Held-out evaluation: only the training compressions' tool positions go into the database.
+        for (const auto& c : train_cases)
+            plan.positions.push_back({c.name, c.tool.path.front()}), plan.direction = (c.tool.path.back() - c.tool.path.front()).normalized();
         plan.depths_mm = depths;
         EnrichmentDatabase db;
         {
@@ -250,7 +256,7 @@ void add_subcommand_demo(CLI::App& app)
             EnrichmentBuildOptions options;
             options.checkpoint_directory = dir / "enrichment.phe.partial";
             options.progress = [&](double f, const std::string& m) { bar.update(f, m); };
-            db = build_enrichment_database(fine, coarse, embedding, validation_cases.front().tool, plan, options);
+            db = build_enrichment_database(fine, coarse, embedding, train_cases.front().tool, plan, options);
             bar.finish();
         }
         write_enrichment_database(dir / "enrichment.phe", db);
@@ -259,8 +265,8 @@ void add_subcommand_demo(CLI::App& app)
         const double database_s = seconds_since(t);
         const auto database_bytes = fs::file_size(dir / "enrichment.phe");
 
-        step(5, "validation compressions D, E followed in " + std::to_string(track_steps) +
-                    " tool positions: homogeneous, high-resolution heterogeneous, coarse-to-fine");
+        step(5, "training (A, B, C) and held-out (D, E) compressions followed in " + std::to_string(track_steps) +
+                    " tool positions: homogeneous, high-resolution heterogeneous, coarse-to-fine; rigid baseline");
         t = clock::now();
         ModelParameters homogeneous_parameters = fit.fitted;
         homogeneous_parameters.variant = ModelVariant::homogeneous;
@@ -269,32 +275,50 @@ void add_subcommand_demo(CLI::App& app)
         struct Method {
             std::string name, paper;
             double paper_all, paper_surface, paper_internal, paper_ms;
-            std::vector<TreReport> tre;
+            std::vector<TreReport> tre, tre_train; ///< held-out (D, E); training (A, B, C)
             std::vector<double> ms;
         };
-        std::vector<Method> methods{{"homogeneous (Han et al.)", "7.74 / 6.39 / 8.81 mm, 344.83 ms", 7.74, 6.39, 8.81, 344.83, {}, {}},
-                                    {"high-resolution heterogeneous", "2.22 / 2.45 / 2.04 mm, 344.83 ms", 2.22, 2.45, 2.04, 344.83, {}, {}},
-                                    {"coarse-to-fine", "3.42 / 3.46 / 3.38 mm, 36.76 ms", 3.42, 3.46, 3.38, 36.76, {}, {}}};
+        std::vector<Method> methods{{"homogeneous (Han et al.)", "7.74 / 6.39 / 8.81 mm, 344.83 ms", 7.74, 6.39, 8.81, 344.83, {}, {}, {}},
+                                    {"high-resolution heterogeneous", "2.22 / 2.45 / 2.04 mm, 344.83 ms", 2.22, 2.45, 2.04, 344.83, {}, {}, {}},
+                                    {"coarse-to-fine", "3.42 / 3.46 / 3.38 mm, 36.76 ms", 3.42, 3.46, 3.38, 36.76, {}, {}, {}},
+                                    {"rigid (noisy surface landmarks)", "-", 0, 0, 0, 0, {}, {}, {}},
+                                    {"landmarks left at rest", "-", 0, 0, 0, 0, {}, {}, {}}};
         json per_state;
         ProgressDisplay bar("registration");
-        for (std::size_t c = 0; c < validation_cases.size(); ++c) {
-            const auto& vc = validation_cases[c];
+        std::vector<CompressionCase> all_cases = train_cases;
+        all_cases.insert(all_cases.end(), validation_cases.begin(), validation_cases.end());
+        for (std::size_t c = 0; c < all_cases.size(); ++c) {
+            const auto& vc = all_cases[c];
+            const bool held_out = c >= train_cases.size();
             const TrackingRun run = track_compression(fine, coarse, embedding, db, vc.tool, rest_landmarks, track_steps, EnrichmentMatching::parameters,
                                                       blend, prediction, vc.name, [&](int s) {
-                                                          bar.update((double(c) + double(s) / double(track_steps)) / double(validation_cases.size()),
+                                                          bar.update((double(c) + double(s) / double(track_steps)) / double(all_cases.size()),
                                                                      fmt::format("{} step {}", vc.name, s));
                                                       });
             if (run.last_match.outside_range) logger()->warn("{}: outside the database's range ({}); extrapolated", vc.name, run.last_match.range_note);
             // Homogeneous model: the same tracking.
             CompressionTracker plain(homogeneous, vc.tool, prediction);
             const Vec3 a = vc.tool.path.front(), b = vc.tool.path.back();
-            for (int s = 1; s <= track_steps; ++s)
-                methods[0].ms.push_back(1e3 * plain.move_to(a + (b - a) * double(s) / double(track_steps), vc.name + " (homogeneous)").seconds);
+            for (int s = 1; s <= track_steps; ++s) {
+                const double seconds = plain.move_to(a + (b - a) * double(s) / double(track_steps), vc.name + " (homogeneous)").seconds;
+                if (held_out) methods[0].ms.push_back(1e3 * seconds);
+            }
             const auto homogeneous_u = plain.displacement_mm();
             const LandmarkSet homogeneous_landmarks = move_landmarks(homogeneous, homogeneous_u, rest_landmarks);
-            methods[0].tre.push_back(compute_tre(homogeneous_landmarks, vc.truth, vc.name));
-            methods[1].tre.push_back(compute_tre(run.high_resolution_landmarks, vc.truth, vc.name));
-            methods[2].tre.push_back(compute_tre(run.coarse_to_fine_landmarks, vc.truth, vc.name));
+            // Rigid baseline: the rigid motion that best maps the rest surface landmarks onto their noisy
+            // observed positions in this state (what a tracked pointer would give), applied to all.
+            const DatasetState& observed_state = dataset.state(vc.name);
+            const LandmarkSet observed = read_landmarks(dataset.path(observed_state.files.at("landmarks_noisy")));
+            const LandmarkSet rigid_landmarks = rigid_landmark_registration(rest_landmarks, observed, LandmarkType::surface, vc.name + " (rigid)");
+            const auto record = [&](Method& m, const LandmarkSet& predicted) {
+                (held_out ? m.tre : m.tre_train).push_back(compute_tre(predicted, vc.truth, vc.name));
+            };
+            record(methods[0], homogeneous_landmarks);
+            record(methods[1], run.high_resolution_landmarks);
+            record(methods[2], run.coarse_to_fine_landmarks);
+            record(methods[3], rigid_landmarks);
+            record(methods[4], rest_landmarks);
+            if (!held_out) continue; // timings, outputs and figures: the held-out compressions
             methods[1].ms.insert(methods[1].ms.end(), run.high_resolution_ms.begin(), run.high_resolution_ms.end());
             methods[2].ms.insert(methods[2].ms.end(), run.coarse_to_fine_ms.begin(), run.coarse_to_fine_ms.end());
             // VTU for ParaView: the fine mesh with both solutions and their difference; the homogeneous one.
@@ -355,20 +379,27 @@ void add_subcommand_demo(CLI::App& app)
         std::vector<TreSeries> series;
         for (const auto& m : methods) series.push_back({m.name.substr(0, m.name.find(' ')) == "high-resolution" ? "HIGH-RES" : m.name.substr(0, m.name.find(' ')),
                                                         pool_tre(m.tre)});
-        write_png(dir / "figures" / "tre.png", render_tre_chart(series, "TRE ON VALIDATION COMPRESSIONS D, E"));
+        write_png(dir / "figures" / "tre.png", render_tre_chart(series, "TRE ON HELD-OUT COMPRESSIONS D, E"));
 
         step(7, "summary");
         json table = json::array();
-        std::string text = fmt::format("\nphysreg demo — {} phantom, validation compressions D and E ({} landmarks each), {} threads\n\n", preset,
-                                       rest_landmarks.size(), omp_get_max_threads());
-        text += fmt::format("{:<32}{:>26}{:>16}   {}\n", "method", "TRE all/surface/internal", "ms per update", "paper 000 (all/surface/internal, time)");
+        std::string text = fmt::format("\nphysreg demo — {} phantom (body ground truth: gel, tetrahedra, Mooney-Rivlin, unknown moduli), "
+                                       "{} landmarks per compression, {} threads\n\n", preset, rest_landmarks.size(), omp_get_max_threads());
+        text += fmt::format("{:<34}{:>28}{:>28}{:>10}   {}\n", "method", "training A,B,C: all/surf/int", "held-out D,E: all/surf/int", "ms/update",
+                            "paper 000 (all/surface/internal, time)");
         for (const auto& m : methods) {
-            const TreReport r = pool_tre(m.tre);
-            const double ms = std::accumulate(m.ms.begin(), m.ms.end(), 0.0) / double(m.ms.size());
-            text += fmt::format("{:<32}{:>8.3f} /{:>6.3f} /{:>6.3f} mm{:>13.1f}   {}\n", m.name, r.all.mean_mm, r.surface.mean_mm, r.internal.mean_mm, ms, m.paper);
-            table.push_back({{"method", m.name}, {"tre", json::parse(tre_stats_json(r))}, {"ms_per_update", ms},
-                             {"paper_000", {{"tre_all_mm", m.paper_all}, {"tre_surface_mm", m.paper_surface}, {"tre_internal_mm", m.paper_internal}, {"ms_per_frame", m.paper_ms}}}});
+            const TreReport r = pool_tre(m.tre), rt = pool_tre(m.tre_train);
+            const double ms = m.ms.empty() ? 0.0 : std::accumulate(m.ms.begin(), m.ms.end(), 0.0) / double(m.ms.size());
+            text += fmt::format("{:<34}{:>9.2f} /{:>6.2f} /{:>6.2f} mm{:>9.2f} /{:>6.2f} /{:>6.2f} mm{:>10}   {}\n", m.name, rt.all.mean_mm,
+                                rt.surface.mean_mm, rt.internal.mean_mm, r.all.mean_mm, r.surface.mean_mm, r.internal.mean_mm,
+                                m.ms.empty() ? std::string("-") : fmt::format("{:.1f}", ms), m.paper);
+            json row = {{"method", m.name}, {"tre_held_out", json::parse(tre_stats_json(r))}, {"tre_training", json::parse(tre_stats_json(rt))}};
+            if (!m.ms.empty()) row["ms_per_update"] = ms;
+            if (m.paper_all > 0)
+                row["paper_000"] = {{"tre_all_mm", m.paper_all}, {"tre_surface_mm", m.paper_surface}, {"tre_internal_mm", m.paper_internal}, {"ms_per_frame", m.paper_ms}};
+            table.push_back(row);
         }
+        text += "(rigid: fitted to the 11 noisy surface landmarks of each state, so its surface TRE is a fit residual)\n";
         const double total_s = seconds_since(start);
         text += fmt::format("\nfitted k_c,s-t = {:.4g} N/m, k_c,s-v = {:.4g} N/m (paper 000: 600, 500); training TRE {:.3f} mm (paper 2.00), validation "
                             "{:.3f} mm (paper 2.55)\n",
@@ -381,6 +412,7 @@ void add_subcommand_demo(CLI::App& app)
         text += fmt::format("outputs in '{}': registration/*.vtu (ParaView), figures/*.png, params.json, enrichment.phe, phantom/ (3D Slicer: "
                             "images, fields, landmarks)\n", dir.string());
         json summary = {{"preset", preset},
+                        {"seed", o->seed},
                         {"methods", table},
                         {"fitted", parameters_json(fit.fitted)},
                         {"train_tre", json::parse(tre_stats_json(fit.train_pooled))},

@@ -47,17 +47,17 @@ void add_subcommand_phantom(CLI::App& app)
     sub->add_option("--seed", o->seed, "Seed (1 … 4294967295) of the ground-truth materials and mesh, noise, bias field and annotation "
                                        "noise (same seed → identical files)");
     sub->add_option("--resolution", o->resolution, "Preset image voxel size, mm (default 1.25; small: 4)");
-    sub->add_option("--ground-truth-size", o->grid, "Ground-truth tetrahedron sizes ORGAN,BODY (largest circumradius, mm; default 3,10; "
+    sub->add_option("--ground-truth-size", o->grid, "Ground-truth tetrahedron sizes ORGAN,BODY (largest circumradius, mm; default 3,12; "
                                                     "small: 7,18)");
     sub->add_option("--materials", o->materials, "Literature values the ground-truth moduli are drawn around: paper000 (default), "
                                                  "healthy or cirrhotic (paper 001)");
-    sub->add_option("--depths", o->depths, "Tool travel on the skin from first contact of the five default compressions A–E, mm "
-                                           "(default 20,25,20,15,22; small: 12,15,12,10,12)");
-    sub->add_option("--load-step", o->load_step, "Largest tool travel per Newton load step of the ground truth, mm (default 2.5)");
+    sub->add_option("--depths", o->depths, "Tool travel on the skin from first contact of the default compressions A, B, … (one "
+                                           "per depth, 1 to 5), mm (default 20,25,20,15,22; small: 12,15,12,10,12)");
+    sub->add_option("--load-step", o->load_step, "Largest tool travel per Newton load step of the ground truth, mm (default 5; small: 4)");
     sub->add_flag("--no-calculix", o->no_calculix, "Skip the CalculiX validation of the ground truth (the manifest says so)");
     sub->add_option("--compression", o->compressions, "NAME:X:Z:DEPTH (mm, LPS) instead of the default five; repeatable");
     sub->add_option("--tool", o->tool, "Indenter shape: sphere (default), cylinder (a rod pressed sideways) or box");
-    sub->add_option("--tool-radius", o->tool_radius, "Sphere/cylinder radius, mm (default 12.5; small: 15)");
+    sub->add_option("--tool-radius", o->tool_radius, "Sphere/cylinder radius, mm (default 20; small: 15)");
     sub->add_option("--tool-direction", o->tool_direction, "Pressing direction x,y,z (LPS; default 0,1,0 = posterior)");
     sub->add_option("--tool-axis", o->tool_axis, "Cylinder axis x,y,z (default 1,0,0)");
     sub->add_option("--tool-half-extents", o->tool_half_extents, "Box half extents x,y,z, mm (default 12,6,12)");

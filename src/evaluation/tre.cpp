@@ -1,5 +1,7 @@
 #include "physreg/evaluation/tre.hpp"
 
+#include <Eigen/Geometry>
+
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/figures/canvas.hpp"
@@ -169,6 +171,27 @@ RgbImage render_tre_chart(const std::vector<TreSeries>& series, const std::strin
                black);
     }
     return c.image();
+}
+
+LandmarkSet rigid_landmark_registration(const LandmarkSet& rest, const LandmarkSet& observed, LandmarkType fitted_type, const std::string& what)
+{
+    if (rest.size() != observed.size()) fail("{}: {} rest landmarks but {} observed", what, rest.size(), observed.size());
+    std::vector<std::size_t> used;
+    for (std::size_t l = 0; l < rest.size(); ++l) {
+        if (rest[l].name != observed[l].name) fail("{}: landmark {} is '{}' at rest but '{}' observed", what, l, rest[l].name, observed[l].name);
+        if (!observed[l].position.allFinite()) fail("{}: landmark '{}' is not finite", what, observed[l].name);
+        if (rest[l].type == fitted_type) used.push_back(l);
+    }
+    if (used.size() < 3) fail("{}: {} landmarks to fit a rigid motion to (at least 3 needed)", what, used.size());
+    Eigen::Matrix3Xd from(3, static_cast<Eigen::Index>(used.size())), to(3, static_cast<Eigen::Index>(used.size()));
+    for (std::size_t k = 0; k < used.size(); ++k) {
+        from.col(static_cast<Eigen::Index>(k)) = rest[used[k]].position;
+        to.col(static_cast<Eigen::Index>(k)) = observed[used[k]].position;
+    }
+    const Eigen::Matrix4d t = Eigen::umeyama(from, to, false);
+    LandmarkSet out = rest;
+    for (auto& l : out) l.position = t.topLeftCorner<3, 3>() * l.position + t.topRightCorner<3, 1>();
+    return out;
 }
 
 } // namespace physreg

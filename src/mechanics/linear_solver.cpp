@@ -73,6 +73,7 @@ void symmetric_product(const SparseMatrix& k, const Eigen::VectorXd& x, Eigen::V
 struct SymmetricSolver::Impl {
     Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> factor;
     bool analysed = false, factored = false;
+    double last_shift = 0.0;
     Eigen::Index pattern_nnz = -1, pattern_rows = -1;
     std::vector<double> coordinates; ///< pcg-amg: node positions for the rigid rotations
 
@@ -102,11 +103,15 @@ struct SymmetricSolver::Impl {
         // Away from equilibrium a compressed near-incompressible material can have a strongly
         // indefinite tangent (large compressive pressure in the geometric stiffness): the shift
         // grows until the factor exists, which turns the step towards steepest descent.
-        for (double shift = 1e-6 * largest; shift <= 1.001e3 * largest; shift *= 10.0) {
+        // Each failed attempt costs a factorisation: start from a tenth of the last shift that worked
+        // (successive tangents of one solve need similar shifts) instead of from 1e-6.
+        const double first = last_shift > 0.0 ? std::max(1e-6 * largest, 0.1 * last_shift) : 1e-6 * largest;
+        for (double shift = first; shift <= 1.001e3 * largest; shift *= 10.0) {
             factor.setShift(shift);
             factor.factorize(k);
             if (factor.info() == Eigen::Success) {
                 factored = true;
+                last_shift = shift;
                 logger()->debug("linear solver: tangent not positive definite, factored with shift {:.3g}", shift);
                 return shift;
             }

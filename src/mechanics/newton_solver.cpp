@@ -247,6 +247,7 @@ NewtonSolver::Outcome NewtonSolver::newton(double s, NewtonSummary& summary, std
         return Outcome::inverted;
     }
     Eigen::VectorXd rhs(dofs), step(dofs);
+    std::vector<double> recent;
     for (int it = 0;; ++it) {
         // Residual on free dofs; the prescribed dofs still to move.
         double residual = 0.0, reference = 0.0, pending = 0.0;
@@ -262,6 +263,11 @@ NewtonSolver::Outcome NewtonSolver::newton(double s, NewtonSummary& summary, std
         summary.reference_force_n = reference;
         if (it > 0) summary.residual_history.push_back(residual);
         if (pending == 0.0 && residual <= m_options.residual_tolerance * reference) return Outcome::converged;
+        // With the multipliers behind the pressures, the tangent's curvature term is inexact and
+        // Newton only creeps (see contact_term): hand back for a multiplier update (inexact ALM).
+        if (m_allow_stall && pending == 0.0 && !m_loads.indenters.empty() && recent.size() >= 3 && residual > 0.5 * recent[recent.size() - 3])
+            return Outcome::stalled;
+        recent.push_back(residual);
         if (it == m_options.max_iterations) {
             why = fmt::format("Newton did not converge in {} iterations (largest free residual {:.3g} N, tolerance {:.3g} N; residual "
                               "history {})",
@@ -340,13 +346,14 @@ NewtonSolver::Outcome NewtonSolver::solve_increment(double s, NewtonSummary& sum
     const auto& surface = m_model.surface_nodes();
     const auto& rest = m_model.rest_positions();
     for (int update = 0;; ++update) {
+        m_allow_stall = m_options.update_contact_on_stall && update < m_options.max_contact_updates;
         const Outcome o = newton(s, summary, why, inverted, progress);
-        if (o != Outcome::converged) return o;
+        if (o != Outcome::converged && o != Outcome::stalled) return o;
         if (m_loads.indenters.empty()) return o;
         const auto start = Clock::now();
         summary.max_penetration_mm = max_penetration(s);
         summary.contact_nodes = m_contact_count;
-        if (summary.max_penetration_mm <= m_options.penetration_tolerance_mm) {
+        if (o == Outcome::converged && summary.max_penetration_mm <= m_options.penetration_tolerance_mm) {
             summary.contact_s += seconds_since(start);
             return o;
         }

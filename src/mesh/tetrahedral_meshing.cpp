@@ -109,7 +109,6 @@ void TetMeshingOptions::validate() const
         fail("tetrahedral meshing: facet_angle_deg = {} must lie in (0, 30] (CGAL's refinement terminates up to 30°)", facet_angle_deg);
     if (!(radius_edge_ratio >= 2.0))
         fail("tetrahedral meshing: radius_edge_ratio = {} must be ≥ 2 (Delaunay refinement cannot guarantee less)", radius_edge_ratio);
-    if (!(exude_seconds >= 0)) fail("tetrahedral meshing: exude_seconds = {} must be ≥ 0", exude_seconds);
 }
 
 VolumeMesh mesh_labels_tetrahedral(const LabelVolume& labels, const TetMeshingOptions& options, const std::string& what)
@@ -148,8 +147,7 @@ VolumeMesh mesh_labels_tetrahedral(const LabelVolume& labels, const TetMeshingOp
     Complex complex;
     try {
         complex = CGAL::make_mesh_3<Complex>(domain, criteria, params::no_perturb(), params::no_exude());
-        if (options.exude_seconds > 0)
-            CGAL::exude_mesh_3(complex, params::time_limit = options.exude_seconds, params::sliver_bound = 12.0);
+        if (options.exude) CGAL::exude_mesh_3(complex, params::sliver_bound = 12.0);
     } catch (const std::exception& e) {
         fail("{}: CGAL Mesh_3 failed: {}", what, e.what());
     }

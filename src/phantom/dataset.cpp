@@ -82,6 +82,9 @@ PhantomSpec PhantomSpec::preset_spec(const std::string& name)
 {
     PhantomSpec spec;
     spec.preset = name;
+    // A 40 mm ball: pressed 25 mm into the gel, a 25 mm one would sink two radii deep and fold the
+    // skin over itself.
+    spec.tool.radius_mm = 20.0;
     if (name == "cirs057a") return spec;
     if (name == "small") {
         spec.voxel_mm = 4.0;
@@ -90,8 +93,7 @@ PhantomSpec PhantomSpec::preset_spec(const std::string& name)
         spec.ground_truth_mesh.body_cell_mm = 18.0;
         spec.ground_truth_mesh.facet_mm = 5.0;
         spec.ground_truth_mesh.facet_distance_mm = 1.5;
-        spec.ground_truth_mesh.exude_seconds = 2.0;
-        spec.load_step_mm = 4.0;
+        spec.load_step_mm = 6.0;
         spec.depths_mm = {12, 15, 12, 10, 12};
         spec.tool.radius_mm = 15.0;
         spec.surface_percentages = {50, 10};
@@ -114,6 +116,8 @@ void PhantomSpec::validate() const
         if (!std::isfinite(c.x_mm) || !std::isfinite(c.z_mm)) fail("phantom: compression {}: position is not finite", c.name);
         if (!(c.direction.norm() > 0.0) || !c.direction.allFinite()) fail("phantom: compression {}: direction must be a non-zero vector", c.name);
     }
+    if (compressions.empty() && (depths_mm.empty() || depths_mm.size() > 5))
+        fail("phantom: {} depths given; the default compressions take 1 to 5 (A, B, … in order)", depths_mm.size());
     for (const double d : depths_mm)
         if (!(d > 0.0 && d <= 60.0)) fail("phantom: depth {} mm outside (0, 60]", d);
     if (!(tool.radius_mm > 0.0) || !std::isfinite(tool.radius_mm)) fail("phantom: tool radius {} mm must be > 0", tool.radius_mm);
@@ -313,11 +317,13 @@ std::vector<CompressionSpec> default_compressions(const Prepared& p, const Phant
     const std::pair<double, double> pattern[] = {{0.45, 0.5}, {0.25, 0.45}, {0.62, 0.55}, {0.4, 0.25}, {0.55, 0.75}};
     std::vector<CompressionSpec> out;
     const Vec3 start_y(0, lo.y() - 0.5 * image_length, 0);
-    for (int c = 0; c < 5; ++c) {
+    // One compression per depth, at the first positions A, B, … (at most five).
+    const int count = static_cast<int>(std::min<std::size_t>(5, spec.depths_mm.size()));
+    for (int c = 0; c < count; ++c) {
         CompressionSpec s;
         s.name = std::string(1, static_cast<char>('A' + c));
         s.tool = spec.tool;
-        s.depth_mm = spec.depths_mm[static_cast<std::size_t>(c) % spec.depths_mm.size()];
+        s.depth_mm = spec.depths_mm[static_cast<std::size_t>(c)];
         const double x0 = lo.x() + pattern[c].first * (hi.x() - lo.x()), z0 = lo.z() + pattern[c].second * (hi.z() - lo.z());
         // Nearest column (in 2 mm rings) through the liver. A tool pressing the liver itself needs
         // liver well beyond its depth; one pressing the gel above it, a liver worth aiming at.

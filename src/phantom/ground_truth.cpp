@@ -20,7 +20,6 @@ void GroundTruthMeshing::validate() const
     for (const auto& [name, v] : {std::pair<const char*, double>{"organ cell size", organ_cell_mm}, {"kidney cell size", kidney_cell_mm},
                                   {"body cell size", body_cell_mm}, {"facet size", facet_mm}, {"facet distance", facet_distance_mm}})
         if (!(std::isfinite(v) && v > 0.0 && v <= 100.0)) fail("ground-truth mesh: {} = {} mm must lie in (0, 100]", name, v);
-    if (!(exude_seconds >= 0)) fail("ground-truth mesh: exude time {} s must be ≥ 0", exude_seconds);
 }
 
 TissueTable draw_ground_truth_tissues(MaterialSet set, const LabelRoles& roles, const std::set<std::int32_t>& present, std::uint64_t seed,
@@ -50,7 +49,7 @@ TissueTable draw_ground_truth_tissues(MaterialSet set, const LabelRoles& roles, 
             table.tissues.push_back(t);
         }
     };
-    const double nu_organ = getenv("GTNU") ? atof(getenv("GTNU")) : 0.495, nu_gel = getenv("GTNU") ? atof(getenv("GTNU")) : 0.497;
+    const double nu_organ = 0.495, nu_gel = 0.497;
     const double parenchyma_e = log_uniform(parenchyma);
     add(roles.liver, "parenchyma", parenchyma_e, nu_organ);
     add(roles.lesion, "lesion", log_uniform(lesion), nu_organ);
@@ -151,7 +150,6 @@ GroundTruthModel build_body_model(const LabelVolume& labels, const LabelRoles& r
     o.default_cell_size_mm = meshing.body_cell_mm;
     o.facet_size_mm = meshing.facet_mm;
     o.facet_distance_mm = meshing.facet_distance_mm;
-    o.exude_seconds = meshing.exude_seconds;
     o.seed = seed;
     for (const auto& t : tissues.tissues) {
         o.labels.insert(t.label);
@@ -234,9 +232,11 @@ GroundTruthSolve solve_ground_truth_state(const GroundTruthModel& m, Loads loads
     NewtonOptions options;
     options.residual_tolerance = ground_truth_residual_tolerance;
     options.penetration_tolerance_mm = ground_truth_penetration_tolerance_mm;
-    if (getenv("GTCURV")) options.exact_contact_curvature = true;
-    if (getenv("GTPEN")) options.contact_penalty_scale = atof(getenv("GTPEN"));
-    if (getenv("GTCHOL")) options.linear.kind = LinearSolverKind::cholmod;
+    // Early multiplier updates and a soft penalty (0.2 × the node's stiffness bound, the
+    // multipliers do the rest): measured on the small preset, 7 Newton iterations per load step
+    // instead of 20–40 (and no stagnation at 15 mm with ν 0.495).
+    options.update_contact_on_stall = true;
+    options.contact_penalty_scale = 0.2;
     NewtonSolver solver(*m.model, options);
     solver.set_loads(loads);
     GroundTruthSolve s;
@@ -257,11 +257,10 @@ GroundTruthSolve solve_ground_truth_state(const GroundTruthModel& m, Loads loads
             fail("ground truth for {}: no equilibrium at load step {} of {}: {}", what, step, load_steps, summary.message);
         s.worst_residual_ratio = std::max(s.worst_residual_ratio, summary.residual_n / std::max(summary.reference_force_n, 1e-300));
         s.max_penetration_mm = summary.max_penetration_mm;
-        logger()->info("{}: step {}/{}: {} Newton iterations, {} contact updates, {} factorisations; assembly {:.2f} s, factor {:.2f} s, "
+        logger()->debug("{}: step {}/{}: {} Newton iterations, {} contact updates, {} factorisations; assembly {:.2f} s, factor {:.2f} s, "
                         "solve {:.2f} s, contact {:.2f} s, line search {:.2f} s, total {:.2f} s", what, step, load_steps, summary.newton_iterations,
                         summary.contact_updates, summary.factorisations, summary.assembly_s, summary.factorisation_s, summary.solve_s,
                         summary.contact_s, summary.line_search_s, summary.seconds);
-        if (getenv("GTHIST")) { std::string h; for (double r : summary.residual_history) h += fmt::format(" {:.2g}", r); logger()->info("history ref {:.3g}:{}", summary.reference_force_n, h); }
     }
     s.load_steps = load_steps;
     s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -298,7 +297,6 @@ CalculixValidation validate_ground_truth_against_calculix(const TissueTable& tis
     o.default_cell_size_mm = 4.0;
     o.facet_size_mm = 2.5;
     o.facet_distance_mm = 0.4;
-    o.exude_seconds = 5.0;
     const VolumeMesh mesh = mesh_labels_tetrahedral(block, o, "CalculiX validation block");
     // Base fixed; the top nodes within 8 mm of the axis pushed down 3 mm (free to slide sideways).
     double top = -1e300, bottom = 1e300;

@@ -149,16 +149,20 @@ expect_error "simulate: relaxation key under newton" "applies to method: relaxat
 [ -z "$(ls -A "$work/bad5" "$work/bad6" "$work/bad7" 2>/dev/null)" ] && pass || failed "no outputs after refused cases"
 
 # physreg phantom: the small preset, its manifest, bad input leaving nothing behind.
-expect_ok "phantom small" "$physreg" --log-level warn phantom --preset small --seed 3 -o "$work/ph" --json
+expect_ok "phantom small" "$physreg" --log-level warn phantom --preset small --seed 3 --depths 8,10,8,6 -o "$work/ph" --json
 grep -q '"format": "physreg-phantom-dataset"' "$work/out.txt" && pass || failed "phantom --json prints the manifest"
-for f in manifest.json tissues.yaml rest/labels.nii.gz rest/intensity.nii.gz rest/landmarks.csv rest/slices.png \
+grep -q '"calculix_validation"' "$work/out.txt" && pass || failed "phantom manifest records the CalculiX validation"
+for f in manifest.json ground_truth_tissues.yaml rest/labels.nii.gz rest/intensity.nii.gz rest/landmarks.csv rest/slices.png \
          states/A/displacement.nii.gz states/A/inverse_displacement.nii.gz states/A/mesh.vtu states/A/partial_surface_050.ply \
          states/insufflation/labels.nii.gz; do
   expect_file "$work/ph/$f"
 done
 expect_ok "info reads a phantom image" "$physreg" info "$work/ph/states/B/labels.nii.gz"
 expect_error "phantom: existing output" "not empty" "$physreg" phantom --preset small -o "$work/ph"
-expect_ok "phantom: --force replaces" "$physreg" --log-level warn phantom --preset small --seed 3 -o "$work/ph" --force
+expect_ok "phantom: one compression" "$physreg" --log-level warn phantom --preset small --depths 6 --no-calculix -o "$work/ph1"
+expect_ok "phantom: --force replaces" "$physreg" --log-level warn phantom --preset small --depths 6 --no-calculix -o "$work/ph1" --force
+expect_file "$work/ph1/states/A/mesh.vtu"
+[ ! -e "$work/ph1/states/B" ] && pass || failed "one depth makes one compression"
 expect_error "phantom: unknown preset" "unknown preset 'liver9'" "$physreg" phantom --preset liver9 -o "$work/ph_bad1"
 expect_no_file "$work/ph_bad1"
 expect_error "phantom: compression outside the body" "outside the body" "$physreg" phantom --preset small --compression X:400:0:5 -o "$work/ph_bad2"
@@ -170,9 +174,11 @@ expect_error "phantom: corrupt label map" "not_an_image.nii.gz" "$physreg" phant
 expect_no_file "$work/ph_bad4"
 expect_error "phantom: no liver label" "no liver label" "$physreg" phantom --from-labels "$work/ph/rest/labels.nii.gz" --label-roles "liver=9" -o "$work/ph_bad5"
 expect_no_file "$work/ph_bad5"
-expect_error "phantom: depth beyond the organ" "exceeds 60 % of the organs' thickness" "$physreg" phantom --preset small --compression L:60:8:40 -o "$work/ph_bad6"
+expect_error "phantom: seed out of range" "--seed 0 outside" "$physreg" phantom --preset small --seed 0 -o "$work/ph_bad6"
 expect_no_file "$work/ph_bad6"
-expect_error "phantom: tool narrower than the cells" "narrower than the ground-truth cells" "$physreg" phantom --preset small --tool-radius 2 -o "$work/ph_bad6"
+expect_error "phantom: too many depths" "6 depths given" "$physreg" phantom --preset small --depths 5,5,5,5,5,5 -o "$work/ph_bad6"
+expect_no_file "$work/ph_bad6"
+expect_error "phantom: tool narrower than the facets" "narrower than two surface facets" "$physreg" phantom --preset small --tool-radius 2 -o "$work/ph_bad6"
 expect_no_file "$work/ph_bad6"
 ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
 
@@ -225,7 +231,7 @@ ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
 # physreg enrich build / apply, bench enrich on the small phantom.
 cg="--coarse-grid 12x9x6"
 expect_ok "enrich build" "$physreg" --log-level warn enrich build --dataset "$work/ph" --parameters "$work/params.json" $cg --positions B,D \
-  --depths 3,6,9 -o "$work/db.phe" --json
+  --depths 6,10,14 -o "$work/db.phe" --json
 expect_file "$work/db.phe"
 grep -q '"conditions": 6' "$work/out.txt" && pass || failed "enrich build reports 6 conditions"
 [ -e "$work/db.phe.partial" ] && failed "checkpoints left after a finished build" || pass

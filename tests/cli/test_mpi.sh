@@ -4,8 +4,8 @@ set -eu
 physreg="$1"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-"$physreg" --log-level warn phantom --preset small -o "$work/ph"
-args=(--log-level warn enrich build --dataset "$work/ph" --grid 36x27x12 --coarse-grid 12x9x6 --positions B,C,D --depths 3,6)
+"$physreg" --log-level warn phantom --preset small --depths 6,8,6,6 --no-calculix -o "$work/ph"
+args=(--log-level warn enrich build --dataset "$work/ph" --grid 36x27x12 --coarse-grid 12x9x6 --positions B,C,D --depths 6,10)
 "$physreg" "${args[@]}" -o "$work/one.phe"
 root=()
 [ "$(id -u)" -eq 0 ] && root=(--allow-run-as-root)

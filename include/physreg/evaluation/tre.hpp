@@ -34,6 +34,10 @@ struct TreReport {
 TreReport compute_tre(const LandmarkSet& predicted, const LandmarkSet& truth, const std::string& what);
 /// Pools several reports (e.g. the training compressions) into one.
 TreReport pool_tre(const std::vector<TreReport>& reports);
+/// The rigid baseline: the least-squares rigid motion (Umeyama, no scaling; Eigen::umeyama) taking
+/// the `rest` landmarks of the given type to their `observed` positions (same names), applied to
+/// every rest landmark. Throws Error naming `what` with fewer than 3 such landmarks or mismatched sets.
+LandmarkSet rigid_landmark_registration(const LandmarkSet& rest, const LandmarkSet& observed, LandmarkType fitted_type, const std::string& what);
 
 std::string tre_stats_json(const TreReport& report);               ///< {"all": {...}, "surface": …}
 std::string tre_report_json(const TreReport& report);              ///< stats plus per-landmark rows

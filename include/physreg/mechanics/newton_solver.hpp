@@ -49,6 +49,10 @@ struct NewtonOptions {
     /// indefinite. By default the term uses min(p, λ) (exact once the multipliers have converged:
     /// quadratic convergence near the solution, a positive definite tangent on first contact).
     bool exact_contact_curvature = false;
+    /// Update the multipliers as soon as Newton stalls (the residual falls less than 2× in two
+    /// iterations) instead of only after convergence: with λ near the pressures the curvature
+    /// term becomes exact and Newton fast again. Off by default (the classical ALM).
+    bool update_contact_on_stall = false;
     LinearSolverOptions linear;
     void validate() const;
 };
@@ -108,7 +112,8 @@ private:
     };
     bool evaluate(const std::vector<double>& u, double s, Evaluation& out, SparseMatrix* k, NewtonSummary& summary);
     double contact_terms(const std::vector<double>& u, double s, std::vector<double>& gradient, SparseMatrix* k, bool count);
-    enum class Outcome { converged, not_converged, inverted };
+    enum class Outcome { converged, not_converged, inverted, stalled };
+    bool m_allow_stall = false;
     Outcome newton(double s, NewtonSummary& summary, std::string& why, std::int64_t& inverted, const ProgressCallback& progress);
     Outcome solve_increment(double s, NewtonSummary& summary, std::string& why, std::int64_t& inverted, const ProgressCallback& progress);
     double max_penetration(double s) const;

@@ -26,7 +26,7 @@ struct TetMeshingOptions {
     double facet_distance_mm = 0.6;                ///< largest distance of a facet to the true interface
     double facet_angle_deg = 25.0;                 ///< smallest facet angle
     double radius_edge_ratio = 2.5;                ///< largest circumradius / shortest edge of a cell
-    double exude_seconds = 20.0;                   ///< sliver exudation time limit (0: skip)
+    bool exude = true;                             ///< sliver exudation (to its end: no time limit, so reproducible)
     unsigned seed = 1;                             ///< CGAL's random generator (the same seed, the same mesh)
     void validate() const;
 };

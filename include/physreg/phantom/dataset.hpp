@@ -58,7 +58,7 @@ struct PhantomSpec {
     /// The literature values the ground-truth moduli are drawn around (ground_truth.hpp).
     MaterialSet materials = MaterialSet::paper000;
     GroundTruthMeshing ground_truth_mesh;
-    double load_step_mm = 2.5;                ///< largest tool travel per Newton load step
+    double load_step_mm = 5.0;                ///< largest tool travel per Newton load step
     /// Run the small CalculiX validation of the ground-truth discretisation (needs ccx; the
     /// manifest says so when it is absent).
     bool calculix_validation = true;

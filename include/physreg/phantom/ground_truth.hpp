@@ -32,10 +32,9 @@ enum class MaterialSet;
 struct GroundTruthMeshing {
     double organ_cell_mm = 3.0;   ///< parenchyma, lesions, vessels
     double kidney_cell_mm = 6.0;
-    double body_cell_mm = 10.0;   ///< gel
+    double body_cell_mm = 12.0;   ///< gel
     double facet_mm = 4.0;        ///< every surface and interface (the skin the tool presses included)
     double facet_distance_mm = 0.6;
-    double exude_seconds = 20.0;
     void validate() const;
 };
 

@@ -102,7 +102,7 @@ namespace physreg {
 void check_from_labels_dataset(const std::filesystem::path& root)
 {
     const PhantomDataset d = read_phantom_dataset(root);
-    ASSERT_EQ(d.states.size(), 7u);
+    ASSERT_EQ(d.states.size(), 4u); // rest, A, B, insufflation
     const LabelVolume rest = read_label_volume(d.path(d.state("rest").files.at("labels")));
     for (const auto& s : d.states) {
         SCOPED_TRACE(s.name);
@@ -123,7 +123,7 @@ TEST(DataPhantomFromLabels, RealPhantomCtLabels)
     PhantomSpec spec = PhantomSpec::preset_spec("small");
     spec.preset = "from-labels";
     spec.labels_file = shared_data / "labels.nii.gz"; // 0 air, 1 body, 2 liver, 3 lesions, 4 vessels, 5 bone, 6 kidneys
-    spec.ground_truth_grid = {36, 27, 12};
+    spec.depths_mm = {10, 12}; // two compressions of the body ground truth (skin travel)
     test::TempDir dir;
     generate_phantom_dataset(spec, dir / "ds", false, {});
     check_from_labels_dataset(dir / "ds");
@@ -137,7 +137,7 @@ TEST(DataPhantomFromLabels, PatientLiverAndVesselMasks)
     spec.labels_file = shared_data / "hepaticvessel_008_liver.nii.gz";
     spec.vessel_mask = shared_data / "hepaticvessel_008_vsnet.nii.gz";
     spec.roles = parse_label_roles("liver=1", "test");
-    spec.ground_truth_grid = {48, 40, 24};
+    spec.depths_mm = {6, 8}; // no body label: the organs alone, pressed directly
     test::TempDir dir;
     generate_phantom_dataset(spec, dir / "ds", false, {});
     check_from_labels_dataset(dir / "ds");
