@@ -57,7 +57,7 @@ void add_subcommand_phantom(CLI::App& app)
     sub->add_flag("--no-calculix", o->no_calculix, "Skip the CalculiX validation of the ground truth (the manifest says so)");
     sub->add_option("--compression", o->compressions, "NAME:X:Z:DEPTH (mm, LPS) instead of the default five; repeatable");
     sub->add_option("--tool", o->tool, "Indenter shape: sphere (default), cylinder (a rod pressed sideways) or box");
-    sub->add_option("--tool-radius", o->tool_radius, "Sphere/cylinder radius, mm (default 20; small: 15)");
+    sub->add_option("--tool-radius", o->tool_radius, "Sphere/cylinder radius, mm (default 30; small: 15)");
     sub->add_option("--tool-direction", o->tool_direction, "Pressing direction x,y,z (LPS; default 0,1,0 = posterior)");
     sub->add_option("--tool-axis", o->tool_axis, "Cylinder axis x,y,z (default 1,0,0)");
     sub->add_option("--tool-half-extents", o->tool_half_extents, "Box half extents x,y,z, mm (default 12,6,12)");
