@@ -33,7 +33,7 @@ void add_subcommand_phantom(CLI::App& app)
         std::vector<std::string> compressions;
         std::optional<double> resolution, tool_radius, insufflation_pa, landmark_noise, surface_noise;
         std::uint64_t seed = 1;
-        bool replace = false, no_calculix = false;
+        bool replace = false, no_calculix = false, organs_only = false;
         std::optional<double> load_step;
     };
     auto o = std::make_shared<Options>();
@@ -54,6 +54,8 @@ void add_subcommand_phantom(CLI::App& app)
     sub->add_option("--depths", o->depths, "Tool travel on the skin from first contact of the default compressions A, B, … (one "
                                            "per depth, 1 to 5), mm (default 20,25,20,15,22; small: 12,15,12,10,12)");
     sub->add_option("--load-step", o->load_step, "Largest tool travel per Newton load step of the ground truth, mm (default 5; small: 4)");
+    sub->add_flag("--organs-only", o->organs_only, "Simulate the organs alone, posterior faces fixed, the tool pressing them directly "
+                                                   "(no gel: for studies of the liver models' own mechanics)");
     sub->add_flag("--no-calculix", o->no_calculix, "Skip the CalculiX validation of the ground truth (the manifest says so)");
     sub->add_option("--compression", o->compressions, "NAME:X:Z:DEPTH (mm, LPS) instead of the default five; repeatable");
     sub->add_option("--tool", o->tool, "Indenter shape: sphere (default), cylinder (a rod pressed sideways) or box");
@@ -92,6 +94,7 @@ void add_subcommand_phantom(CLI::App& app)
         }
         if (o->load_step) spec.load_step_mm = *o->load_step;
         spec.calculix_validation = !o->no_calculix;
+        spec.simulate_body = !o->organs_only;
         spec.materials = parse_material_set(o->materials);
         if (!o->depths.empty()) spec.depths_mm = parse_number_list(o->depths, "--depths");
         spec.tool.shape = parse_indenter_shape(o->tool);

@@ -58,6 +58,9 @@ struct PhantomSpec {
     /// The literature values the ground-truth moduli are drawn around (ground_truth.hpp).
     MaterialSet materials = MaterialSet::paper000;
     GroundTruthMeshing ground_truth_mesh;
+    /// false: the organs alone, posterior faces fixed, the tool pressing the organs directly (no gel)
+    /// — the pre-issue-17 setting, for studies of the liver models' own mechanics (and their tests).
+    bool simulate_body = true;
     double load_step_mm = 5.0;                ///< largest tool travel per Newton load step
     /// Run the small CalculiX validation of the ground-truth discretisation (needs ccx; the
     /// manifest says so when it is absent).

@@ -1,5 +1,6 @@
 // Detail enrichment (paper 000 eqs. 9–10): exact reproduction of a training condition and the
 // database file's round trip and corruption checks.
+#include "organs_only_phantom.hpp"
 #include "test_support.hpp"
 
 #include "physreg/io/image_io.hpp"
@@ -25,7 +26,8 @@ struct TwoLevels {
     EnrichmentCondition condition;
     TwoLevels()
     {
-        generate_phantom_dataset(PhantomSpec::preset_spec("small"), dir / "ds", false, {});
+        // The liver models' own mechanics: the organs-only ground truth, the tool pressing the liver.
+        generate_phantom_dataset(test::organs_only_small_spec(), dir / "ds", false, {});
         const PhantomDataset d = read_phantom_dataset(dir / "ds");
         const LabelVolume labels = read_label_volume(d.path(d.state("rest").files.at("labels")));
         ModelParameters p;
