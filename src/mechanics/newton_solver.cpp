@@ -345,8 +345,10 @@ NewtonSolver::Outcome NewtonSolver::solve_increment(double s, NewtonSummary& sum
 {
     const auto& surface = m_model.surface_nodes();
     const auto& rest = m_model.rest_positions();
-    for (int update = 0;; ++update) {
-        m_allow_stall = m_options.update_contact_on_stall && update < m_options.max_contact_updates;
+    // Updates after convergence and updates on a stall are budgeted apart (max_contact_updates each).
+    int stall_updates = 0;
+    for (int update = 0;;) {
+        m_allow_stall = m_options.update_contact_on_stall && stall_updates < m_options.max_contact_updates;
         const Outcome o = newton(s, summary, why, inverted, progress);
         if (o != Outcome::converged && o != Outcome::stalled) return o;
         if (m_loads.indenters.empty()) return o;
@@ -357,8 +359,9 @@ NewtonSolver::Outcome NewtonSolver::solve_increment(double s, NewtonSummary& sum
             summary.contact_s += seconds_since(start);
             return o;
         }
-        if (update == m_options.max_contact_updates) {
-            why = fmt::format("contact: {} augmented Lagrangian updates left a penetration of {:.3g} mm (tolerance {:.3g} mm)", update,
+        if (o == Outcome::stalled) ++stall_updates;
+        else if (update++ == m_options.max_contact_updates) {
+            why = fmt::format("contact: {} augmented Lagrangian updates left a penetration of {:.3g} mm (tolerance {:.3g} mm)", m_options.max_contact_updates,
                               summary.max_penetration_mm, m_options.penetration_tolerance_mm);
             return Outcome::not_converged;
         }

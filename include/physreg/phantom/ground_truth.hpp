@@ -74,7 +74,7 @@ struct GroundTruthSolve {
 
 /// Newton tolerance of the ground truth (largest free residual / largest internal nodal force).
 constexpr double ground_truth_residual_tolerance = 1e-3;
-constexpr double ground_truth_penetration_tolerance_mm = 0.05;
+constexpr double ground_truth_penetration_tolerance_mm = 0.1; // about the chord sag between skin nodes
 
 /// Static equilibrium under `loads` (the model's supports are added) in `load_steps` equal steps.
 /// Throws Error naming `what` for an element the load folds or no convergence.
