@@ -16,7 +16,6 @@
 #include "physreg/mechanics/calculix.hpp"
 #include "physreg/mesh/coarsen.hpp"
 #include "physreg/mesh/faces.hpp"
-#include "physreg/mesh/hex_meshing.hpp"
 #include "physreg/mesh/label_grid.hpp"
 #include "physreg/mesh/point_location.hpp"
 #include "physreg/phantom/landmark_picking.hpp"

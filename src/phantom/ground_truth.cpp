@@ -142,8 +142,9 @@ GroundTruthModel build_body_model(const LabelVolume& labels, const LabelRoles& r
                                   const GroundTruthMeshing& meshing, unsigned seed)
 {
     meshing.validate();
-    std::set<std::int32_t> present;
-    for (const auto l : labels.labels) present.insert(l);
+    std::vector<char> seen(65536, 0); // labels present in the volume (a set per voxel would be slow)
+    for (const auto l : labels.labels) seen[l] = 1;
+    const auto present = [&](std::int32_t l) { return l >= 0 && l < 65536 && seen[static_cast<std::size_t>(l)]; };
     bool has_body = false;
     for (const auto& t : tissues.tissues) has_body |= roles.body.count(t.label) > 0;
     TetMeshingOptions o;
@@ -157,10 +158,10 @@ GroundTruthModel build_body_model(const LabelVolume& labels, const LabelRoles& r
                                   : roles.body.count(t.label) ? meshing.body_cell_mm
                                                               : meshing.organ_cell_mm;
     }
-    const bool has_bone = has_body && std::any_of(roles.bone.begin(), roles.bone.end(), [&](std::int32_t l) { return present.count(l) > 0; });
+    const bool has_bone = has_body && std::any_of(roles.bone.begin(), roles.bone.end(), present);
     if (has_bone)
         for (const auto l : roles.bone)
-            if (present.count(l)) o.labels.insert(l), o.cell_size_mm[l] = meshing.body_cell_mm;
+            if (present(l)) o.labels.insert(l), o.cell_size_mm[l] = meshing.body_cell_mm;
     const VolumeMesh full = mesh_labels_tetrahedral(labels, o, "ground-truth mesh");
 
     GroundTruthModel m;
