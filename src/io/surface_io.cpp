@@ -170,9 +170,17 @@ SurfaceMesh read_ply(const fs::path& path, const std::string& what)
     }
     if (!in) fail("{}: truncated PLY header", what);
     SurfaceMesh mesh;
+    bool has_vertex_normals = false, has_vertex_labels = false;
+    for (const auto& e : elements)
+        if (e.name == "vertex")
+            for (const auto& prop : e.properties) {
+                has_vertex_normals = has_vertex_normals || prop.name == "nx";
+                has_vertex_labels = has_vertex_labels || prop.name == "label" || prop.name == "feature";
+            }
     for (const auto& e : elements) {
         for (std::size_t i = 0; i < e.count; ++i) {
-            Vec3 p = Vec3::Zero();
+            Vec3 p = Vec3::Zero(), normal = Vec3::Zero();
+            std::int32_t vertex_label = 0;
             std::array<std::int32_t, 2> label{0, 0};
             bool has_label = false;
             std::vector<std::int32_t> polygon;
@@ -187,6 +195,10 @@ SurfaceMesh read_ply(const fs::path& path, const std::string& what)
                     if (prop.name == "x") p[0] = v;
                     if (prop.name == "y") p[1] = v;
                     if (prop.name == "z") p[2] = v;
+                    if (prop.name == "nx") normal[0] = v;
+                    if (prop.name == "ny") normal[1] = v;
+                    if (prop.name == "nz") normal[2] = v;
+                    if (prop.name == "label" || prop.name == "feature") vertex_label = static_cast<std::int32_t>(v);
                 } else if (prop.name == "inside_label") {
                     label[0] = static_cast<std::int32_t>(v);
                     has_label = true;
@@ -195,7 +207,11 @@ SurfaceMesh read_ply(const fs::path& path, const std::string& what)
                     has_label = true;
                 }
             }
-            if (e.name == "vertex") mesh.vertices.push_back(p);
+            if (e.name == "vertex") {
+                mesh.vertices.push_back(p);
+                if (has_vertex_normals) mesh.vertex_normals.push_back(normal);
+                if (has_vertex_labels) mesh.vertex_labels.push_back(vertex_label);
+            }
             if (e.name == "face") {
                 if (polygon.size() < 3) fail("{}: face {} has {} vertices", what, i, polygon.size());
                 for (std::size_t k = 1; k + 1 < polygon.size(); ++k) {
@@ -286,6 +302,17 @@ void write_obj(std::ofstream& out, const SurfaceMesh& mesh)
 }
 
 } // namespace
+
+SurfaceMesh read_point_set(const fs::path& path)
+{
+    const std::string what = "point set '" + path.string() + "'";
+    if (!fs::exists(path)) fail("{}: file does not exist", what);
+    if (full_extension(path) != ".ply") fail("{}: point sets are read from PLY files", what);
+    SurfaceMesh mesh = read_ply(path, what);
+    mesh.validate(what);
+    if (mesh.vertices.empty()) fail("{}: holds no vertices", what);
+    return mesh;
+}
 
 SurfaceMesh read_surface(const fs::path& path)
 {

@@ -156,19 +156,32 @@ void BackwardEuler::set_loads(Loads loads)
         fail("backward Euler: rigid indenters ('{}') are not supported by the implicit dynamics yet; use the newton or "
              "explicit method",
              loads.indenters.front().name);
-    std::fill(m_constrained.begin(), m_constrained.end(), 0);
+    std::vector<std::uint8_t> constrained(m_constrained.size(), 0);
     for (const auto& c : loads.constraints)
         for (auto node : c.nodes)
             for (int d = 0; d < 3; ++d)
-                if (c.dofs[d]) m_constrained[3 * node + d] = 1;
+                if (c.dofs[d]) constrained[3 * node + d] = 1;
     m_loads = std::move(loads);
-    m_have_factor = false; // the constrained set changed
+    // New forces alone keep the factor (paper 001's registration changes them every step).
+    if (constrained != m_constrained) {
+        m_constrained.swap(constrained);
+        m_have_factor = false;
+    }
 }
 
 void BackwardEuler::set_body_acceleration(const Vec3& g)
 {
     if (!g.allFinite()) fail("backward Euler: the body acceleration is not finite");
     m_gravity = g;
+}
+
+void BackwardEuler::set_external_stiffness(std::vector<double> diagonal)
+{
+    if (!diagonal.empty() && diagonal.size() != m_u.size())
+        fail("backward Euler: external stiffness of {} values for {} dofs", diagonal.size(), m_u.size());
+    for (std::size_t i = 0; i < diagonal.size(); ++i)
+        if (!(diagonal[i] >= 0 && std::isfinite(diagonal[i]))) fail("backward Euler: external stiffness {} N/mm at dof {} must be finite and ≥ 0", diagonal[i], i);
+    m_external_stiffness = std::move(diagonal);
 }
 
 void BackwardEuler::set_state(const std::vector<double>& u, const std::vector<double>& v, double time_s)
@@ -224,6 +237,12 @@ void BackwardEuler::factorise_jacobian(const std::vector<double>& u, BackwardEul
     const double* k = m_k.valuePtr();
     const double* m = m_mass.valuePtr();
     for (Eigen::Index p = 0; p < nnz; ++p) j[p] = cm * m[p] + ck * k[p];
+    if (!m_external_stiffness.empty())
+        for (std::size_t i = 0; i < m_external_stiffness.size(); ++i) {
+            const auto node = static_cast<std::int32_t>(i / 3);
+            const int d = static_cast<int>(i % 3);
+            j[m_assembler.value_index(node, node, d, d)] += dt * m_external_stiffness[i];
+        }
     // Constrained dofs: identity rows and columns, scaled like the rest of the diagonal.
     double diagonal = 0.0;
     for (Eigen::Index c = 0; c < m_jacobian.cols(); ++c) diagonal += m_jacobian.coeff(c, c);
@@ -290,7 +309,8 @@ bool BackwardEuler::attempt(BackwardEulerStep& stats, bool fresh_every_iteration
         for (std::size_t i = 0; i < n; ++i) {
             r[i] = m_constrained[i] ? 0.0
                                     : (mass_v[i] - mass_v_old[i]) / dt + alpha * mass_v[i] + (1.0 + beta_dt) * f[i] -
-                                          beta_dt * m_force[i] - f_ext[i];
+                                          beta_dt * m_force[i] - f_ext[i] +
+                                          (m_external_stiffness.empty() ? 0.0 : m_external_stiffness[i] * dt * v[i]);
             if (!std::isfinite(r[i])) fail("backward Euler: non-finite residual at dof {} (node {}) at t = {:.6g} s", i, i / 3, t1);
             norm = std::max(norm, std::abs(r[i]));
         }

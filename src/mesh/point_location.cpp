@@ -144,4 +144,38 @@ std::vector<double> interpolate_nodal(const VolumeMesh& mesh, const NodeEmbeddin
     return out;
 }
 
+std::vector<NodeEmbedding> embed_landmarks(const VolumeMesh& mesh, const LandmarkSet& points, double max_distance_mm, const std::string& what)
+{
+    if (mesh.cell_type != CellType::tetrahedron) fail("embedding landmarks in {}: tetrahedral meshes only", what);
+    const PointLocator locator(mesh);
+    std::vector<NodeEmbedding> out;
+    for (const auto& l : points) {
+        if (auto e = locator.locate(l.position)) {
+            out.push_back(*e);
+            continue;
+        }
+        NodeEmbedding best;
+        best.distance_mm = std::numeric_limits<double>::infinity();
+        for (std::size_t c = 0; c < mesh.cell_count(); ++c) {
+            const auto ids = mesh.cell(c);
+            if ((mesh.nodes[ids[0]] - l.position).norm() > best.distance_mm + 50.0) continue;
+            bool ok = true;
+            Vec3 xi = natural_coordinates(mesh, c, l.position, ok);
+            if (!ok) continue;
+            // Clamp to the simplex: negative barycentric weights to zero, renormalised.
+            double w[4] = {1.0 - xi.sum(), xi[0], xi[1], xi[2]}, sum = 0;
+            for (double& v : w) sum += (v = std::max(0.0, v));
+            for (double& v : w) v /= sum;
+            const Vec3 q = w[0] * mesh.nodes[ids[0]] + w[1] * mesh.nodes[ids[1]] + w[2] * mesh.nodes[ids[2]] + w[3] * mesh.nodes[ids[3]];
+            const double d = (q - l.position).norm();
+            if (d < best.distance_mm) best = {static_cast<std::int32_t>(c), Vec3(w[1], w[2], w[3]), false, d};
+        }
+        if (!(best.distance_mm <= max_distance_mm))
+            fail("landmark {} lies {:.2f} mm outside {} (at most {:.1f} mm allowed)", l.name, best.distance_mm, what,
+                 max_distance_mm);
+        out.push_back(best);
+    }
+    return out;
+}
+
 } // namespace physreg

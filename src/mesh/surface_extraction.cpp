@@ -17,6 +17,10 @@ void SurfaceMesh::validate(const std::string& what) const
         if (!vertices[v].allFinite()) fail("{}: vertex {} is not finite", what, v);
     if (!labels.empty() && labels.size() != triangles.size())
         fail("{}: {} labels for {} triangles", what, labels.size(), triangles.size());
+    if (!vertex_normals.empty() && vertex_normals.size() != vertices.size())
+        fail("{}: {} vertex normals for {} vertices", what, vertex_normals.size(), vertices.size());
+    if (!vertex_labels.empty() && vertex_labels.size() != vertices.size())
+        fail("{}: {} vertex labels for {} vertices", what, vertex_labels.size(), vertices.size());
 }
 
 namespace {

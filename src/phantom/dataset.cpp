@@ -221,41 +221,6 @@ GroundTruth build_ground_truth(const Prepared& p, const PhantomSpec& spec)
     return gt;
 }
 
-// Points (landmarks) in a tetrahedral mesh: the containing cell, else the nearest cell within
-// `max_distance_mm` with barycentric coordinates clamped to it; farther points are an error.
-std::vector<NodeEmbedding> embed_points(const VolumeMesh& mesh, const LandmarkSet& points, double max_distance_mm, const std::string& what)
-{
-    const PointLocator locator(mesh);
-    std::vector<NodeEmbedding> out;
-    for (const auto& l : points) {
-        if (auto e = locator.locate(l.position)) {
-            out.push_back(*e);
-            continue;
-        }
-        NodeEmbedding best;
-        best.distance_mm = std::numeric_limits<double>::infinity();
-        for (std::size_t c = 0; c < mesh.cell_count(); ++c) {
-            const auto ids = mesh.cell(c);
-            if ((mesh.nodes[ids[0]] - l.position).norm() > best.distance_mm + 50.0) continue;
-            bool ok = true;
-            Vec3 xi = natural_coordinates(mesh, c, l.position, ok);
-            if (!ok) continue;
-            // Clamp to the simplex: negative barycentric weights to zero, renormalised.
-            double w[4] = {1.0 - xi.sum(), xi[0], xi[1], xi[2]}, sum = 0;
-            for (double& v : w) sum += (v = std::max(0.0, v));
-            for (double& v : w) v /= sum;
-            const Vec3 q = w[0] * mesh.nodes[ids[0]] + w[1] * mesh.nodes[ids[1]] + w[2] * mesh.nodes[ids[2]] + w[3] * mesh.nodes[ids[3]];
-            const double d = (q - l.position).norm();
-            if (d < best.distance_mm) best = {static_cast<std::int32_t>(c), Vec3(w[1], w[2], w[3]), false, d};
-        }
-        if (!(best.distance_mm <= max_distance_mm))
-            fail("landmark {} lies {:.2f} mm outside the ground-truth mesh ({}; at most {:.1f} mm allowed)", l.name, best.distance_mm, what,
-                 max_distance_mm);
-        out.push_back(best);
-    }
-    return out;
-}
-
 Vec3 liver_centroid(const Prepared& p, Vec3& lo, Vec3& hi)
 {
     const auto& g = p.labels.geometry;
@@ -597,7 +562,7 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
         BoundarySurface liver_surface;
     };
     const auto view_of = [&](const GroundTruthModel& m) {
-        return ModelView{&m, embed_points(m.mesh, rest_landmarks, 1.5 * m.organ_cell_mm, m.name + " mesh"), liver_boundary(m.mesh, is_liver, notch_x)};
+        return ModelView{&m, embed_landmarks(m.mesh, rest_landmarks, 1.5 * m.organ_cell_mm, "the ground-truth " + m.name + " mesh"), liver_boundary(m.mesh, is_liver, notch_x)};
     };
     const ModelView body_view = view_of(gt.body);
     const std::optional<ModelView> organ_view = gt.organs ? std::optional<ModelView>(view_of(*gt.organs)) : std::nullopt;

@@ -2,6 +2,7 @@
 
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
+#include "physreg/io/surface_io.hpp"
 #include "physreg/mesh/faces.hpp"
 #include "physreg/phantom/abdominal_phantom.hpp"
 
@@ -225,6 +226,26 @@ void write_boundary_ply(const std::filesystem::path& path, const VolumeMesh& mes
         for (const auto& t : boundary.triangles) out << "3 " << slot(t[0]) << ' ' << slot(t[1]) << ' ' << slot(t[2]) << '\n';
         if (!out) fail("cannot write '{}'", path.string());
     });
+}
+
+LabelledPointCloud read_point_cloud(const std::filesystem::path& path)
+{
+    const std::string ext = path.extension().string();
+    LabelledPointCloud cloud;
+    if (ext == ".csv") {
+        cloud = read_point_cloud_csv(path);
+    } else if (ext == ".ply") {
+        const SurfaceMesh points = read_point_set(path);
+        cloud.points = points.vertices;
+        cloud.normals = points.vertex_normals;
+        for (const auto& n : cloud.normals)
+            if (!n.allFinite()) fail("point cloud '{}': a normal is not finite", path.string());
+        cloud.labels = points.vertex_labels.empty() ? std::vector<std::int32_t>(points.vertices.size(), feature_none) : points.vertex_labels;
+    } else {
+        fail("point cloud '{}': unknown extension '{}' (use .ply or .csv)", path.string(), ext);
+    }
+    if (cloud.points.empty()) fail("point cloud '{}': no points", path.string());
+    return cloud;
 }
 
 } // namespace physreg

@@ -9,6 +9,9 @@
 namespace physreg {
 
 SurfaceMesh read_surface(const std::filesystem::path& path);
+/// The vertices of a PLY file (with its optional normals and vertex labels); triangles are read
+/// but not required (point clouds).
+SurfaceMesh read_point_set(const std::filesystem::path& path);
 void write_surface(const std::filesystem::path& path, const SurfaceMesh& surface);
 
 } // namespace physreg

@@ -80,6 +80,14 @@ public:
     void set_loads(Loads loads);
     /// A uniform body acceleration (gravity), mm/s²: nodal force = lumped mass × g × load factor.
     void set_body_acceleration(const Vec3& g_mm_s2);
+    /// Position-dependent external forces (paper 001's pair forces) linearised about the state at
+    /// the start of each step: f_ext(u) ≈ f_ext − K_e (u − u_n), K_e diagonal (N/mm per dof, ≥ 0,
+    /// empty: none). Makes the forces implicit in the step (stable for any Δt) without their exact
+    /// derivative; K_e enters the Jacobian at its next factorisation.
+    void set_external_stiffness(std::vector<double> diagonal_n_per_mm);
+    /// The next step factorises a fresh Jacobian (fixed-iteration runs with a stale tangent never
+    /// decide that themselves).
+    void refresh_tangent() { m_have_factor = false; }
 
     /// Advances by one time step. Throws Error for an inverted element (naming it and the time), a
     /// non-finite force, or a step that does not converge even with a fresh tangent every iteration.
@@ -108,6 +116,7 @@ private:
     SymmetricSolver m_linear;
     Loads m_loads;
     Vec3 m_gravity = Vec3::Zero();
+    std::vector<double> m_external_stiffness; ///< empty or 3 per node, N/mm
     std::vector<std::uint8_t> m_constrained;
     std::vector<double> m_u, m_v, m_force; ///< m_force = f(m_u)
     double m_time = 0.0;

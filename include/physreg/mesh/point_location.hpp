@@ -1,5 +1,6 @@
 #pragma once
 // Locating points (landmarks) in a volume mesh and interpolating nodal fields there.
+#include "physreg/core/landmark.hpp"
 #include "physreg/mesh/coarsen.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
 
@@ -38,5 +39,10 @@ std::vector<double> shape_weights(CellType type, const Vec3& natural);
 /// Interpolates a nodal field (`components` values per node, node-major) at an embedding.
 std::vector<double> interpolate_nodal(const VolumeMesh& mesh, const NodeEmbedding& where,
                                       const std::vector<double>& field, int components);
+
+/// Landmarks in a tetrahedral mesh: the containing cell, else the nearest cell within
+/// `max_distance_mm` with barycentric weights clamped to it (a surface landmark just outside a
+/// smooth mesh); farther points are an Error naming the landmark and `what`.
+std::vector<NodeEmbedding> embed_landmarks(const VolumeMesh& mesh, const LandmarkSet& points, double max_distance_mm, const std::string& what);
 
 } // namespace physreg

@@ -13,6 +13,10 @@ struct SurfaceMesh {
     std::vector<std::array<std::int32_t, 3>> triangles; ///< counter-clockwise seen from outside
     /// Per triangle: {label inside, label outside}; outside 0 = exterior. Empty if unlabelled.
     std::vector<std::array<std::int32_t, 2>> labels;
+    /// Optional per-vertex data read from PLY files (empty when absent): normals (nx, ny, nz) and an
+    /// integer vertex label ("label" or "feature", e.g. paper 001's surface regions).
+    std::vector<Vec3> vertex_normals;
+    std::vector<std::int32_t> vertex_labels;
 
     void validate(const std::string& what) const;
 };

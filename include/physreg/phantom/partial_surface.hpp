@@ -48,6 +48,10 @@ LabelledPointCloud visible_surface_patch(const VolumeMesh& mesh, const std::vect
 void write_point_cloud_ply(const std::filesystem::path& path, const LabelledPointCloud& cloud);
 void write_point_cloud_csv(const std::filesystem::path& path, const LabelledPointCloud& cloud);
 LabelledPointCloud read_point_cloud_csv(const std::filesystem::path& path);
+/// A cloud by extension: .csv (x,y,z,label) or .ply (vertices; optional nx ny nz and an integer
+/// "label"/"feature" property; unlabelled points are surface, 0). Throws Error naming the file for
+/// no points and non-finite coordinates or normals.
+LabelledPointCloud read_point_cloud(const std::filesystem::path& path);
 /// The labelled boundary as a PLY mesh (vertices with a "feature" property), atomic.
 void write_boundary_ply(const std::filesystem::path& path, const VolumeMesh& mesh, const std::vector<double>& displacement_mm,
                         const BoundarySurface& boundary);

@@ -1,0 +1,398 @@
+// physreg register-surface: paper 001 — a tetrahedral liver model registered to a partial
+// intra-operative surface (labelled point cloud), with rigid and ICP baselines in the same report.
+#include "cli_support.hpp"
+#include "progress.hpp"
+
+#include "physreg/core/atomic_file.hpp"
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+#include "physreg/evaluation/surface_distance.hpp"
+#include "physreg/evaluation/tre.hpp"
+#include "physreg/field/displacement_sampling.hpp"
+#include "physreg/io/image_io.hpp"
+#include "physreg/io/landmarks_io.hpp"
+#include "physreg/io/mesh_io.hpp"
+#include "physreg/io/surface_io.hpp"
+#include "physreg/io/vtu.hpp"
+#include "physreg/mesh/label_grid.hpp"
+#include "physreg/mesh/point_location.hpp"
+#include "physreg/phantom/dataset.hpp"
+#include "physreg/phantom/landmark_picking.hpp"
+#include "physreg/registration/surface_model.hpp"
+#include "physreg/registration/surface_registration.hpp"
+
+#include <chrono>
+#include <fstream>
+#include <iostream>
+
+namespace physreg::cli {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+struct Options : CommonOptions {
+    std::string dataset, state = "insufflation", labels, model, regions, cloud, landmarks, landmarks_truth, truth_surface, output;
+    std::string liver_labels, method = "biomechanical", material = "healthy", support = "none";
+    int visible = 30;
+    std::optional<double> notch_x, young_modulus;
+    double poisson = 0.45, cell_size = 7.0, field_spacing = 2.0;
+    double d90 = 5.0, traction = 0.5, distance_fraction = 0.9, normal_agreement = 0.7, time_step = 0.1, plateau_tolerance = 0.01;
+    int max_steps = 100, newton_per_step = 1;
+    unsigned seed = 1;
+    bool replace = false;
+};
+
+struct Inputs {
+    VolumeMesh mesh;
+    LabelledTriangles surface;
+    std::optional<TetrahedronQuality> quality;
+    LabelledPointCloud cloud;
+    std::optional<LandmarkSet> landmarks, truth;
+    std::optional<SurfaceMesh> truth_surface;
+    std::optional<VolumeMesh> truth_mesh;   ///< dataset: the ground-truth state's mesh with its nodal displacement
+    std::vector<double> truth_displacement;
+    std::optional<ImageGeometry> field_geometry;
+    json description;
+};
+
+std::set<std::int32_t> parse_label_set(const std::string& text, const std::string& option)
+{
+    std::set<std::int32_t> out;
+    for (double v : parse_number_list(text, option)) {
+        if (v != std::floor(v) || v <= 0) fail("{}: '{}' is not a positive integer label", option, v);
+        out.insert(static_cast<std::int32_t>(v));
+    }
+    return out;
+}
+
+Inputs load_inputs(const Options& o)
+{
+    Inputs in;
+    const int sources = !o.dataset.empty() + !o.labels.empty() + !o.model.empty();
+    if (sources != 1) fail("register-surface: give exactly one of --dataset, --labels and --model");
+    if (!o.dataset.empty()) {
+        if (!o.cloud.empty() || !o.landmarks.empty() || !o.landmarks_truth.empty() || !o.truth_surface.empty() || !o.regions.empty())
+            fail("register-surface: --dataset provides the cloud, landmarks, regions and truth; leave out --cloud, --landmarks, "
+                 "--landmarks-truth, --truth-surface and --regions");
+        const PhantomDataset dataset = read_phantom_dataset(o.dataset);
+        const DatasetState& rest = dataset.state("rest");
+        const DatasetState& state = dataset.state(o.state);
+        if (state.kind == "rest") fail("register-surface: --state {} is the rest state; choose a deformed one", o.state);
+        const auto surface = state.surfaces.find(o.visible);
+        if (surface == state.surfaces.end()) {
+            std::string available;
+            for (const auto& [p, f] : state.surfaces) available += (available.empty() ? "" : ", ") + std::to_string(p);
+            fail("register-surface: state {} has no partial surface with {} % visible (available: {})", o.state, o.visible, available);
+        }
+        const LabelVolume labels = read_label_volume(dataset.path(rest.files.at("labels")));
+        std::set<std::int32_t> liver;
+        for (const auto* role : {&dataset.roles.liver, &dataset.roles.lesion, &dataset.roles.vessel}) liver.insert(role->begin(), role->end());
+        SurfaceModel model = surface_model_from_labels(labels, liver, o.cell_size, find_margin_notch_x(labels, dataset.roles), o.seed,
+                                                       "liver model of '" + o.dataset + "'");
+        in.mesh = std::move(model.mesh);
+        in.surface = std::move(model.surface);
+        in.quality = model.quality;
+        in.cloud = read_point_cloud(dataset.path(surface->second.first));
+        in.landmarks = read_landmarks(dataset.path(rest.files.at("landmarks")));
+        in.truth = read_landmarks(dataset.path(state.files.at("landmarks")));
+        in.truth_surface = read_surface(dataset.path(state.files.at("liver_surface")));
+        MeshData data;
+        in.truth_mesh = read_vtu(dataset.path(state.files.at("mesh")), &data);
+        const DataArray* u = data.find_point("displacement");
+        if (!u || u->components != 3) fail("register-surface: the ground-truth mesh of state {} has no 3-component 'displacement'", o.state);
+        in.truth_displacement = u->values;
+        in.field_geometry = labels.geometry;
+        in.description = {{"dataset", o.dataset}, {"state", o.state}, {"visible_percent", o.visible}, {"cloud", surface->second.first},
+                          {"regions", "from the rest label map (anatomical rule; notch from the label map)"}};
+        return in;
+    }
+    if (o.cloud.empty()) fail("register-surface: --cloud is required with --labels or --model");
+    if (!o.labels.empty()) {
+        const LabelVolume labels = read_label_volume(o.labels);
+        std::set<std::int32_t> liver;
+        if (o.liver_labels.empty())
+            for (const auto& [label, count] : count_labels(labels)) {
+                if (label != 0) liver.insert(label);
+            }
+        else
+            liver = parse_label_set(o.liver_labels, "--liver-labels");
+        SurfaceModel model = surface_model_from_labels(labels, liver, o.cell_size, o.notch_x, o.seed, "liver model of '" + o.labels + "'");
+        in.mesh = std::move(model.mesh);
+        in.surface = std::move(model.surface);
+        in.quality = model.quality;
+        in.field_geometry = labels.geometry;
+        in.description = {{"labels", o.labels}};
+    } else {
+        in.mesh = read_volume_mesh(o.model);
+        if (in.mesh.cell_type != CellType::tetrahedron) fail("register-surface: --model '{}' must hold tetrahedra (paper 001's model)", o.model);
+        std::fill(in.mesh.cell_labels.begin(), in.mesh.cell_labels.end(), 1);
+        in.surface = unlabelled_boundary(in.mesh);
+        in.quality = measure_tetrahedra(in.mesh);
+        in.description = {{"model", o.model}};
+    }
+    if (!o.regions.empty()) {
+        in.surface = regions_from_surface(in.mesh, in.surface, read_surface(o.regions), 5.0, "--regions '" + o.regions + "'");
+        in.description["regions"] = o.regions;
+    } else if (o.labels.empty() || !o.notch_x) {
+        in.description["regions"] = o.labels.empty() ? "none (all surface)" : "anatomical rule, no umbilical notch (no --notch-x)";
+    } else {
+        in.description["regions"] = fmt::format("anatomical rule, notch at x = {} mm", *o.notch_x);
+    }
+    in.cloud = read_point_cloud(o.cloud);
+    in.description["cloud"] = o.cloud;
+    if (!o.landmarks.empty()) in.landmarks = read_landmarks(o.landmarks);
+    if (!o.landmarks_truth.empty()) {
+        if (!in.landmarks) fail("register-surface: --landmarks-truth needs --landmarks (their rest positions)");
+        in.truth = read_landmarks(o.landmarks_truth);
+    }
+    if (!o.truth_surface.empty()) in.truth_surface = read_surface(o.truth_surface);
+    return in;
+}
+
+double young_modulus(const Options& o)
+{
+    if (o.young_modulus) return *o.young_modulus;
+    if (o.material == "healthy") return 3500.0;
+    if (o.material == "cirrhotic") return 30000.0;
+    fail("--material '{}': use healthy (3.5 kPa) or cirrhotic (30 kPa), or give --young-modulus", o.material);
+}
+
+LandmarkSet map_landmarks(const VolumeMesh& mesh, const std::vector<NodeEmbedding>& where, const LandmarkSet& rest, const std::vector<double>& u)
+{
+    LandmarkSet out = rest;
+    for (std::size_t i = 0; i < rest.size(); ++i) {
+        const auto d = interpolate_nodal(mesh, where[i], u, 3);
+        out[i].position += Vec3(d[0], d[1], d[2]);
+    }
+    return out;
+}
+
+/// Boundary nodes whose area-weighted normal points along `direction` (cosine > `cosine`).
+std::vector<std::int32_t> facing_nodes(const VolumeMesh& mesh, const LabelledTriangles& surface, const Vec3& direction, double cosine)
+{
+    std::vector<Vec3> normal(mesh.node_count(), Vec3::Zero());
+    for (const auto& t : surface.triangles) {
+        const Vec3 area = 0.5 * (mesh.nodes[t[1]] - mesh.nodes[t[0]]).cross(mesh.nodes[t[2]] - mesh.nodes[t[0]]);
+        for (auto n : t) normal[static_cast<std::size_t>(n)] += area;
+    }
+    std::vector<std::int32_t> out;
+    for (std::size_t n = 0; n < normal.size(); ++n)
+        if (normal[n].norm() > 0 && normal[n].normalized().dot(direction) > cosine) out.push_back(static_cast<std::int32_t>(n));
+    return out;
+}
+
+struct MethodOutcome {
+    std::string name;
+    std::vector<double> u;
+    double seconds = 0.0;
+    json details;
+};
+
+json evaluate(const MethodOutcome& m, const Inputs& in, const std::vector<NodeEmbedding>& landmark_cells, const std::vector<std::uint8_t>& node_used,
+              const std::vector<std::optional<Vec3>>& truth_at_nodes)
+{
+    json r = m.details;
+    r["seconds"] = m.seconds;
+    const SurfaceMesh deformed = regions_surface(in.mesh, in.surface, &m.u);
+    const SurfaceDistance fit = points_to_surface(in.cloud.points, deformed, "cloud to model");
+    r["cloud_to_model_mm"] = {{"mean", fit.mean_mm}, {"max", fit.max_mm}};
+    if (in.truth_surface) {
+        const HausdorffReport h = hausdorff_distance(deformed, *in.truth_surface, "model vs truth surface");
+        r["hausdorff_mm"] = {{"model_to_truth", {{"mean", h.forward.mean_mm}, {"max", h.forward.max_mm}}},
+                             {"truth_to_model", {{"mean", h.backward.mean_mm}, {"max", h.backward.max_mm}}},
+                             {"mean", h.mean_mm()}, {"max", h.max_mm()}};
+    }
+    if (in.landmarks && in.truth) {
+        const TreReport tre = compute_tre(map_landmarks(in.mesh, landmark_cells, *in.landmarks, m.u), *in.truth, m.name + " landmarks");
+        r["tre"] = json::parse(tre_stats_json(tre));
+        r["tre_per_landmark"] = json::array();
+        for (const auto& e : tre.entries) r["tre_per_landmark"].push_back({{"name", e.name}, {"type", to_string(e.type)}, {"error_mm", e.error_mm}});
+    }
+    if (!truth_at_nodes.empty()) {
+        std::vector<double> errors;
+        for (std::size_t i = 0; i < truth_at_nodes.size(); ++i)
+            if (!node_used[i] && truth_at_nodes[i])
+                errors.push_back((Vec3(m.u[3 * i], m.u[3 * i + 1], m.u[3 * i + 2]) - *truth_at_nodes[i]).norm());
+        const TreStats s = tre_stats(errors);
+        r["node_tre_mm"] = {{"nodes", s.count}, {"mean", s.mean_mm}, {"max", s.max_mm}, {"std", s.std_mm}};
+    }
+    return r;
+}
+
+} // namespace
+
+void add_subcommand_register_surface(CLI::App& app)
+{
+    auto o = std::make_shared<Options>();
+    auto* sub = app.add_subcommand("register-surface", "Register a tetrahedral liver model to a partial intra-operative surface (paper 001): "
+                                                       "labelled matching, arctan forces with annealing, co-rotational backward Euler");
+    sub->add_option("--dataset", o->dataset, "Phantom dataset (physreg phantom): model from its rest labels, cloud, landmarks and truth from --state");
+    sub->add_option("--state", o->state, "Dataset state to register to (default insufflation)");
+    sub->add_option("--visible", o->visible, "Dataset: visible percentage of the surface (one the dataset has: 50, 40, 30, 20, 10; default 30)");
+    sub->add_option("--labels", o->labels, "Liver label volume (NIfTI/NRRD/MHA/DICOM): meshed with CGAL");
+    sub->add_option("--liver-labels", o->liver_labels, "--labels: which labels form the liver (default every nonzero label)");
+    sub->add_option("--notch-x", o->notch_x, "--labels: x (LPS, mm) of the umbilical notch for the anatomical region rule (else no UN region)");
+    sub->add_option("--model", o->model, "Tetrahedral liver mesh (.vtu, .vtk, .msh) instead of --labels");
+    sub->add_option("--regions", o->regions, "Labelled surface (PLY with vertex 'label'/'feature' or face labels; 0 surface, 1 UN, 2 AM) giving the model's regions");
+    sub->add_option("--cloud", o->cloud, "Intra-operative point cloud (.ply with optional normals and 'label', or .csv x,y,z,label), mm, LPS");
+    sub->add_option("--landmarks", o->landmarks, "Targets at rest (CSV/FCSV/.mrk.json) to map through the registration");
+    sub->add_option("--landmarks-truth", o->landmarks_truth, "Their true deformed positions (same names): TRE in the summary");
+    sub->add_option("--truth-surface", o->truth_surface, "The true deformed liver surface (STL/PLY/OBJ): Hausdorff distance in the summary");
+    sub->add_option("--method", o->method, "biomechanical (default), rigid (labelled rigid ICP) or icp (plain ICP); all three are reported");
+    sub->add_option("--material", o->material, "healthy (E 3.5 kPa, default) or cirrhotic (30 kPa), paper 001");
+    sub->add_option("--young-modulus", o->young_modulus, "Parenchyma Young's modulus, Pa (instead of --material)");
+    sub->add_option("--poisson", o->poisson, "Poisson's ratio (default 0.45)");
+    sub->add_option("--cell-size", o->cell_size, "Tetrahedron size (largest circumradius), mm (default 7)");
+    sub->add_option("--d90", o->d90, "Distance at which a pair force reaches 90 % of its maximum, mm (default 5)");
+    sub->add_option("--traction", o->traction, "Largest pair traction as a fraction of E (sets k_max; default 0.5)");
+    sub->add_option("--distance-fraction", o->distance_fraction, "Pruning d_t: keep pairs closer than d_t × the largest (default 0.9)");
+    sub->add_option("--normal-agreement", o->normal_agreement, "Pruning n_t: keep pairs whose normals agree ≥ n_t (default 0.7)");
+    sub->add_option("--support", o->support, "none (default, paper 001) or posterior: surface nodes facing posterior (normal · +y > 0.5) held at rest");
+    sub->add_option("--time-step", o->time_step, "Backward Euler time step, s (default 0.1)");
+    sub->add_option("--plateau-tolerance", o->plateau_tolerance, "A plateau ends when no node moves more than this in a step, mm (default 0.01)");
+    sub->add_option("--newton-per-step", o->newton_per_step, "Newton iterations per time step (default 1: linearised backward Euler; 0: to convergence)");
+    sub->add_option("--max-steps-per-plateau", o->max_steps, "Time steps per plateau at most (default 100)");
+    sub->add_option("--field-spacing", o->field_spacing, "Voxel size of displacement.nii.gz when no label volume gives the grid, mm (default 2)");
+    sub->add_option("--seed", o->seed, "Seed of the CGAL mesher (default 1)");
+    sub->add_option("-o,--output", o->output, "Output folder (mesh.vtu, displacement.nii.gz, landmarks.csv, regions.ply, summary.json)")->required();
+    sub->add_flag("--force", o->replace, "Replace an existing output folder");
+    sub->add_flag("--json", o->json, "Print the summary as JSON on stdout");
+    sub->callback([o] {
+        const auto start = std::chrono::steady_clock::now();
+        if (o->method != "biomechanical" && o->method != "rigid" && o->method != "icp")
+            fail("--method '{}': use biomechanical, rigid or icp", o->method);
+        const double E = young_modulus(*o);
+        StagedDirectory staging(o->output, o->replace); // refuses an existing output before any work
+        ProgressDisplay bar("register-surface");
+        bar.update(0.0, "model and inputs");
+        const Inputs in = load_inputs(*o);
+        logger()->info("register-surface: model {} nodes, {} tetrahedra, {} surface triangles; cloud {} points", in.mesh.node_count(), in.mesh.cell_count(),
+                       in.surface.triangles.size(), in.cloud.points.size());
+        const SurfaceMatcher matcher(in.surface, in.mesh.node_count(), "the model's surface");
+        TledOptions tled;
+        tled.law = MaterialLaw::corotational;
+        const TissueTable tissues = homogeneous_liver_tissues(E, o->poisson);
+        const TledModel model(in.mesh, tissues, tled);
+
+        SurfaceRegistrationOptions options;
+        options.matching.distance_fraction = o->distance_fraction;
+        options.matching.normal_agreement = o->normal_agreement;
+        options.force.d90_mm = o->d90;
+        options.dynamics.time_step_s = o->time_step;
+        options.plateau_tolerance_mm = o->plateau_tolerance;
+        options.max_steps_per_plateau = o->max_steps;
+        options.newton_iterations_per_step = o->newton_per_step;
+        if (o->support == "posterior") {
+            options.fixed_nodes = facing_nodes(in.mesh, in.surface, Vec3::UnitY(), 0.5);
+            logger()->info("register-surface: {} posterior surface nodes held at rest", options.fixed_nodes.size());
+        } else if (o->support != "none") {
+            fail("--support '{}': use none or posterior", o->support);
+        }
+        const double spacing = mean_point_spacing_mm(in.cloud.points);
+        const double k_max = pair_stiffness_n(o->traction, E, spacing);
+        options.schedules = paper001_schedules(k_max);
+
+        // All three methods, the chosen one written out; the others are the report's baselines.
+        std::vector<MethodOutcome> outcomes;
+        std::vector<std::uint8_t> used(in.mesh.node_count(), 0);
+        {
+            MethodOutcome at_rest{"at_rest", std::vector<double>(3 * in.mesh.node_count(), 0.0), 0.0, json::object()};
+            outcomes.push_back(at_rest);
+        }
+        for (const bool labelled : {true, false}) {
+            const RigidSurfaceResult r = register_surface_rigid(model.rest_positions(), matcher, in.cloud, options.matching, labelled);
+            json d = {{"iterations", r.iterations}, {"converged", r.converged}, {"pairs", r.matching.kept},
+                      {"rotation_deg", Eigen::AngleAxisd(r.rotation).angle() * 180.0 / M_PI}, {"translation_mm", {r.translation[0], r.translation[1], r.translation[2]}}};
+            outcomes.push_back({labelled ? "rigid" : "icp", r.displacement_mm, r.seconds, d});
+        }
+        bar.update(0.05, "biomechanical registration");
+        const SurfaceRegistrationResult b = register_surface_biomechanical(model, matcher, in.cloud, options, [&](double f, const std::string& m) {
+            bar.update(0.05 + 0.85 * f, m);
+        });
+        used = b.node_used;
+        {
+            json plateaus = json::array();
+            for (const auto& p : b.plateaus) {
+                json k;
+                for (const auto& [label, v] : p.stiffness_n) k[std::to_string(label)] = v;
+                plateaus.push_back({{"plateau", p.plateau}, {"stiffness_n", k}, {"steps", p.steps}, {"settled", p.reached}, {"last_step_mm", p.last_step_mm},
+                                    {"pairs", p.matching.kept}, {"pruned_distance", p.matching.pruned_distance}, {"pruned_normal", p.matching.pruned_normal},
+                                    {"mean_pair_distance_mm", p.matching.mean_distance_mm}, {"factorisations", p.factorisations}, {"seconds", p.seconds}});
+            }
+            outcomes.push_back({"biomechanical", b.displacement_mm, b.seconds,
+                                {{"time_steps", b.steps}, {"factorisations", b.factorisations}, {"newton_iterations", b.newton_iterations},
+                                 {"time_split_s", {{"matching", b.matching_s}, {"forces", b.force_s}, {"assembly", b.assembly_s},
+                                                   {"factorisation", b.factorisation_s}, {"solves", b.solve_s}}},
+                                 {"plateaus", plateaus}}});
+        }
+        bar.update(0.92, "evaluation and outputs");
+        const std::vector<NodeEmbedding> landmark_cells =
+            in.landmarks ? embed_landmarks(in.mesh, *in.landmarks, 1.5 * o->cell_size, "the liver model") : std::vector<NodeEmbedding>{};
+        std::vector<std::optional<Vec3>> truth_at_nodes;
+        if (in.truth_mesh) {
+            const PointLocator locator(*in.truth_mesh);
+            for (const auto& x : in.mesh.nodes) {
+                const auto e = locator.locate(x);
+                if (!e) {
+                    truth_at_nodes.emplace_back();
+                    continue;
+                }
+                const auto d = interpolate_nodal(*in.truth_mesh, *e, in.truth_displacement, 3);
+                truth_at_nodes.emplace_back(Vec3(d[0], d[1], d[2]));
+            }
+        }
+        json methods;
+        for (const auto& m : outcomes) methods[m.name] = evaluate(m, in, landmark_cells, used, truth_at_nodes);
+        const MethodOutcome& chosen = *std::find_if(outcomes.begin(), outcomes.end(), [&](const MethodOutcome& m) { return m.name == o->method; });
+
+        MeshData data;
+        data.point_data.push_back({"displacement", 3, chosen.u});
+        write_vtu(staging.path() / "mesh.vtu", in.mesh, data);
+        write_surface(staging.path() / "regions.ply", regions_surface(in.mesh, in.surface));
+        write_surface(staging.path() / "registered_surface.ply", regions_surface(in.mesh, in.surface, &chosen.u));
+        const ImageGeometry geometry = in.field_geometry ? *in.field_geometry : image_grid_over_mesh(in.mesh, o->field_spacing, 2 * o->field_spacing);
+        write_displacement_field(staging.path() / "displacement.nii.gz", sample_displacement_field(in.mesh, chosen.u, geometry).field);
+        if (in.landmarks) write_landmarks(staging.path() / "landmarks.csv", map_landmarks(in.mesh, landmark_cells, *in.landmarks, chosen.u));
+
+        json summary;
+        summary["command"] = "register-surface";
+        summary["units"] = {{"length", "mm"}, {"force", "N"}, {"time", "s"}, {"young_modulus", "Pa"}};
+        summary["inputs"] = in.description;
+        summary["method"] = o->method;
+        summary["model"] = {{"kind", "homogeneous"}, {"element", "linear tetrahedra (CGAL Mesh_3), co-rotational"}, {"nodes", in.mesh.node_count()},
+                            {"tetrahedra", in.mesh.cell_count()}, {"surface_triangles", in.surface.triangles.size()},
+                            {"young_modulus_pa", E}, {"poisson_ratio", o->poisson}};
+        if (in.quality)
+            summary["model"]["quality"] = {{"min_dihedral_deg", in.quality->min_dihedral_deg}, {"max_dihedral_deg", in.quality->max_dihedral_deg},
+                                           {"min_radius_ratio", in.quality->min_radius_ratio}, {"mean_edge_mm", in.quality->mean_edge_mm}};
+        std::map<std::string, int> region_triangles;
+        for (auto l : in.surface.labels) ++region_triangles[l == 1 ? "umbilical_notch" : l == 2 ? "anterior_margin" : "surface"];
+        summary["model"]["region_triangles"] = region_triangles;
+        summary["cloud"] = {{"points", in.cloud.points.size()}, {"mean_spacing_mm", spacing}, {"normals", !in.cloud.normals.empty()}};
+        summary["parameters"] = {{"d90_mm", o->d90}, {"traction_ratio", o->traction}, {"k_max_n", k_max}, {"distance_fraction", o->distance_fraction},
+                                 {"normal_agreement", o->normal_agreement}, {"time_step_s", o->time_step}, {"rayleigh_mass_per_s", 0.1},
+                                 {"rayleigh_stiffness_s", 0.1}, {"plateau_tolerance_mm", o->plateau_tolerance}, {"exponent", 3},
+                                 {"r", {{"umbilical_notch", 2}, {"anterior_margin", 4}, {"surface", 10}}}};
+        summary["methods"] = methods;
+        summary["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        write_atomically(staging.path() / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
+        staging.commit();
+        bar.finish();
+        const auto line = [&](const std::string& name) {
+            const json& m = methods[name];
+            std::string s = fmt::format("{:<14}", name);
+            if (m.contains("tre")) s += fmt::format(" TRE {:.2f} mm (internal {:.2f})", m["tre"]["all"]["mean_mm"].get<double>(), m["tre"]["internal"]["mean_mm"].get<double>());
+            if (m.contains("node_tre_mm")) s += fmt::format(", nodes {:.2f} mm", m["node_tre_mm"]["mean"].get<double>());
+            if (m.contains("hausdorff_mm")) s += fmt::format(", Hausdorff mean {:.2f} / max {:.2f} mm", m["hausdorff_mm"]["mean"].get<double>(), m["hausdorff_mm"]["max"].get<double>());
+            s += fmt::format(", cloud→model {:.2f} mm, {:.2f} s", m["cloud_to_model_mm"]["mean"].get<double>(), m["seconds"].get<double>());
+            return s;
+        };
+        if (o->json)
+            std::cout << summary.dump(2) << "\n";
+        else
+            for (const char* name : {"at_rest", "icp", "rigid", "biomechanical"}) std::cerr << line(name) << "\n";
+    });
+}
+
+} // namespace physreg::cli

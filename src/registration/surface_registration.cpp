@@ -1,0 +1,202 @@
+#include "physreg/registration/surface_registration.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+
+#include <Eigen/Geometry>
+#include <chrono>
+#include <cmath>
+#include <fmt/format.h>
+
+namespace physreg {
+
+namespace {
+double seconds_since(std::chrono::steady_clock::time_point start)
+{
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+void mark_used(const std::vector<SurfacePair>& pairs, const LabelledTriangles& source, std::vector<std::uint8_t>& used)
+{
+    std::fill(used.begin(), used.end(), 0);
+    for (const auto& p : pairs)
+        for (auto node : source.triangles[static_cast<std::size_t>(p.triangle)]) used[static_cast<std::size_t>(node)] = 1;
+}
+} // namespace
+
+BackwardEulerOptions SurfaceRegistrationOptions::paper001_dynamics()
+{
+    BackwardEulerOptions o;
+    o.time_step_s = 0.1;
+    o.rayleigh_mass_per_s = 0.1;
+    o.rayleigh_stiffness_s = 0.1;
+    o.mass = MassKind::lumped;
+    o.tangent = TangentUpdate::stale;
+    o.rotated_corotational_tangent = true;
+    o.max_newton_iterations = 20;
+    o.residual_tolerance = 1e-4;
+    return o;
+}
+
+void SurfaceRegistrationOptions::validate() const
+{
+    matching.validate();
+    force.validate();
+    dynamics.validate();
+    if (schedules.empty()) fail("surface registration: no stiffness schedule");
+    for (const auto& [label, s] : schedules) s.validate(fmt::format("surface registration: schedule of label {}", label));
+    if (!(plateau_tolerance_mm > 0 && std::isfinite(plateau_tolerance_mm)))
+        fail("surface registration: plateau tolerance {} mm must be > 0", plateau_tolerance_mm);
+    if (newton_iterations_per_step < 0) fail("surface registration: Newton iterations per step {} must be ≥ 0", newton_iterations_per_step);
+    if (max_steps_per_plateau < 1) fail("surface registration: max steps per plateau {} must be ≥ 1", max_steps_per_plateau);
+}
+
+std::map<std::int32_t, AnnealingSchedule> paper001_schedules(double k_max_n)
+{
+    return {{feature_none, {0.0, k_max_n, 10, 3.0}},
+            {feature_umbilical_notch, {0.1 * k_max_n, k_max_n, 2, 3.0}},
+            {feature_anterior_margin, {0.1 * k_max_n, k_max_n, 4, 3.0}}};
+}
+
+double pair_stiffness_n(double traction_ratio, double young_modulus_pa, double spacing_mm)
+{
+    if (!(traction_ratio > 0 && std::isfinite(traction_ratio))) fail("surface registration: traction ratio {} must be > 0", traction_ratio);
+    if (!(young_modulus_pa > 0 && std::isfinite(young_modulus_pa))) fail("surface registration: Young's modulus {} Pa must be > 0", young_modulus_pa);
+    if (!(spacing_mm > 0 && std::isfinite(spacing_mm))) fail("surface registration: point spacing {} mm must be > 0 (a cloud of distinct points)", spacing_mm);
+    return traction_ratio * young_modulus_pa * 1e-6 * spacing_mm * spacing_mm * std::sqrt(3.0) / 2.0;
+}
+
+SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
+                                                         const SurfaceRegistrationOptions& options,
+                                                         const std::function<void(double, const std::string&)>& progress)
+{
+    const auto start = std::chrono::steady_clock::now();
+    options.validate();
+    if (model.options().law != MaterialLaw::corotational)
+        fail("surface registration: the model must use the co-rotational law (paper 001's linear co-rotational tetrahedra)");
+    for (auto label : cloud.labels)
+        if (!options.schedules.count(label)) fail("surface registration: cloud label {} has no stiffness schedule", label);
+
+    BackwardEulerOptions dynamics = options.dynamics;
+    dynamics.fixed_newton_iterations = options.newton_iterations_per_step;
+    BackwardEuler integrator(model, dynamics);
+    const std::size_t n = 3 * model.node_count();
+    const std::vector<double>& rest = model.rest_positions();
+    SurfaceRegistrationResult result;
+    result.node_used.assign(model.node_count(), 0);
+    const int plateaus = plateau_count(options.schedules);
+    std::vector<double> x(n), forces(n), stiffness(n), previous(n);
+    std::vector<SurfacePair> pairs;
+    for (int plateau = 0; plateau < plateaus; ++plateau) {
+        const auto plateau_start = std::chrono::steady_clock::now();
+        PlateauReport report;
+        report.plateau = plateau;
+        for (const auto& [label, s] : options.schedules) report.stiffness_n[label] = s.stiffness(plateau);
+        const int factorisations_before = integrator.total_factorisations();
+        if (options.newton_iterations_per_step > 0) integrator.refresh_tangent();
+        for (int step = 0; step < options.max_steps_per_plateau; ++step) {
+            const auto& u = integrator.displacement_mm();
+            for (std::size_t i = 0; i < n; ++i) x[i] = rest[i] + u[i];
+            const auto match_start = std::chrono::steady_clock::now();
+            pairs = matcher.match(x, cloud, options.matching, &report.matching);
+            result.matching_s += seconds_since(match_start);
+            if (pairs.empty()) fail("surface registration: no pair left after pruning at plateau {} (cloud far from the model?)", plateau);
+            std::fill(forces.begin(), forces.end(), 0.0);
+            std::fill(stiffness.begin(), stiffness.end(), 0.0);
+            accumulate_pair_forces(pairs, matcher.source(), report.stiffness_n, options.force, forces, &stiffness);
+            Loads loads;
+            loads.external_forces_n = forces;
+            if (!options.fixed_nodes.empty()) loads.constraints.push_back({"support", options.fixed_nodes, {true, true, true}, Vec3::Zero()});
+            integrator.set_loads(std::move(loads));
+            integrator.set_external_stiffness(stiffness);
+            previous = u;
+            const BackwardEulerStep s = integrator.step();
+            if (s.inverted_elements > 0)
+                fail("surface registration: {} element(s) of the model inverted at plateau {} (stiffness {:.3g} N); the forces are too "
+                     "strong for this material: lower the traction ratio or raise d90",
+                     s.inverted_elements, plateau, report.stiffness_n.begin()->second);
+            ++report.steps;
+            ++result.steps;
+            result.newton_iterations += s.newton_iterations;
+            result.force_s += s.force_s;
+            result.assembly_s += s.assembly_s;
+            result.factorisation_s += s.factorisation_s;
+            result.solve_s += s.solve_s;
+            double largest = 0.0;
+            const auto& u1 = integrator.displacement_mm();
+            for (std::size_t i = 0; i < n; i += 3)
+                largest = std::max(largest, std::hypot(u1[i] - previous[i], u1[i + 1] - previous[i + 1], u1[i + 2] - previous[i + 2]));
+            report.last_step_mm = largest;
+            if (largest <= options.plateau_tolerance_mm) {
+                report.reached = true;
+                break;
+            }
+        }
+        report.factorisations = integrator.total_factorisations() - factorisations_before;
+        report.seconds = seconds_since(plateau_start);
+        logger()->debug("surface registration: plateau {}/{}: {} steps{}, {} pairs (pruned {} by distance, {} by normal), mean distance {:.3f} mm, "
+                        "last step {:.4f} mm, {:.2f} s",
+                        plateau + 1, plateaus, report.steps, report.reached ? "" : " (not settled)", report.matching.kept,
+                        report.matching.pruned_distance, report.matching.pruned_normal, report.matching.mean_distance_mm, report.last_step_mm,
+                        report.seconds);
+        result.plateaus.push_back(report);
+        if (progress)
+            progress(static_cast<double>(plateau + 1) / plateaus,
+                     fmt::format("plateau {}/{}, mean pair distance {:.2f} mm", plateau + 1, plateaus, report.matching.mean_distance_mm));
+    }
+    result.displacement_mm = integrator.displacement_mm();
+    for (std::size_t i = 0; i < n; ++i) x[i] = rest[i] + result.displacement_mm[i];
+    pairs = matcher.match(x, cloud, options.matching);
+    mark_used(pairs, matcher.source(), result.node_used);
+    result.factorisations = integrator.total_factorisations();
+    result.seconds = seconds_since(start);
+    return result;
+}
+
+RigidSurfaceResult register_surface_rigid(const std::vector<double>& rest, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
+                                          const MatchingOptions& matching, bool use_labels, int max_iterations, double tolerance_mm)
+{
+    const auto start = std::chrono::steady_clock::now();
+    if (max_iterations < 1) fail("rigid surface registration: max iterations {} must be ≥ 1", max_iterations);
+    const std::size_t n = rest.size();
+    RigidSurfaceResult result;
+    result.node_used.assign(n / 3, 0);
+    std::vector<double> x = rest, next(n);
+    std::vector<SurfacePair> pairs;
+    const auto& triangles = matcher.source().triangles;
+    for (int iteration = 0; iteration < max_iterations; ++iteration) {
+        pairs = use_labels ? matcher.match(x, cloud, matching, &result.matching) : match_unlabelled(x, matcher.source(), cloud, matching, &result.matching);
+        if (pairs.size() < 3) fail("rigid surface registration: {} pair(s) after pruning; at least 3 are needed", pairs.size());
+        // The paired model points in the rest configuration, fitted onto their targets directly.
+        Eigen::Matrix3Xd from(3, static_cast<Eigen::Index>(pairs.size())), to(3, static_cast<Eigen::Index>(pairs.size()));
+        for (std::size_t k = 0; k < pairs.size(); ++k) {
+            const auto& tri = triangles[static_cast<std::size_t>(pairs[k].triangle)];
+            Vec3 p = Vec3::Zero();
+            for (int c = 0; c < 3; ++c) p += pairs[k].weights[c] * Vec3(rest[3 * tri[c]], rest[3 * tri[c] + 1], rest[3 * tri[c] + 2]);
+            from.col(static_cast<Eigen::Index>(k)) = p;
+            to.col(static_cast<Eigen::Index>(k)) = pairs[k].target;
+        }
+        const Eigen::Matrix4d t = Eigen::umeyama(from, to, false);
+        result.rotation = t.topLeftCorner<3, 3>();
+        result.translation = t.topRightCorner<3, 1>();
+        double largest = 0.0;
+        for (std::size_t i = 0; i < n; i += 3) {
+            const Vec3 y = result.rotation * Vec3(rest[i], rest[i + 1], rest[i + 2]) + result.translation;
+            largest = std::max(largest, (y - Vec3(x[i], x[i + 1], x[i + 2])).norm());
+            for (int d = 0; d < 3; ++d) next[i + d] = y[d];
+        }
+        x.swap(next);
+        result.iterations = iteration + 1;
+        if (largest <= tolerance_mm) {
+            result.converged = true;
+            break;
+        }
+    }
+    result.displacement_mm.resize(n);
+    for (std::size_t i = 0; i < n; ++i) result.displacement_mm[i] = x[i] - rest[i];
+    mark_used(pairs, matcher.source(), result.node_used);
+    result.seconds = seconds_since(start);
+    return result;
+}
+
+} // namespace physreg
