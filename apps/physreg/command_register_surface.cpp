@@ -37,7 +37,7 @@ struct Options : CommonOptions {
     int visible = 30;
     std::optional<double> notch_x, young_modulus;
     double poisson = 0.45, cell_size = 7.0, field_spacing = 2.0;
-    double d90 = 5.0, traction = 0.5, distance_fraction = 0.9, normal_agreement = 0.7, time_step = 0.1, plateau_tolerance = 0.01;
+    double d90 = 5.0, traction = 0.5, distance_fraction = 0.9, normal_agreement = 0.7, time_step = 0.1, plateau_tolerance = 0.01, max_pair = 40.0;
     int max_steps = 100, newton_per_step = 1;
     unsigned seed = 1;
     bool replace = false;
@@ -247,6 +247,7 @@ void add_subcommand_register_surface(CLI::App& app)
     sub->add_option("--d90", o->d90, "Distance at which a pair force reaches 90 % of its maximum, mm (default 5)");
     sub->add_option("--traction", o->traction, "Largest pair traction as a fraction of E (sets k_max; default 0.5)");
     sub->add_option("--distance-fraction", o->distance_fraction, "Pruning d_t: keep pairs closer than d_t × the largest (default 0.9)");
+    sub->add_option("--max-pair-distance", o->max_pair, "Pairs longer than this are dropped (a cloud that does not belong to the model), mm (default 40)");
     sub->add_option("--normal-agreement", o->normal_agreement, "Pruning n_t: keep pairs whose normals agree ≥ n_t (default 0.7)");
     sub->add_option("--support", o->support, "none (default, paper 001) or posterior: surface nodes facing posterior (normal · +y > 0.5) held at rest");
     sub->add_option("--time-step", o->time_step, "Backward Euler time step, s (default 0.1)");
@@ -278,6 +279,7 @@ void add_subcommand_register_surface(CLI::App& app)
         SurfaceRegistrationOptions options;
         options.matching.distance_fraction = o->distance_fraction;
         options.matching.normal_agreement = o->normal_agreement;
+        options.matching.max_distance_mm = o->max_pair;
         options.force.d90_mm = o->d90;
         options.dynamics.time_step_s = o->time_step;
         options.plateau_tolerance_mm = o->plateau_tolerance;
@@ -317,7 +319,7 @@ void add_subcommand_register_surface(CLI::App& app)
                 json k;
                 for (const auto& [label, v] : p.stiffness_n) k[std::to_string(label)] = v;
                 plateaus.push_back({{"plateau", p.plateau}, {"stiffness_n", k}, {"steps", p.steps}, {"settled", p.reached}, {"last_step_mm", p.last_step_mm},
-                                    {"pairs", p.matching.kept}, {"pruned_distance", p.matching.pruned_distance}, {"pruned_normal", p.matching.pruned_normal},
+                                    {"pairs", p.matching.kept}, {"pruned_far", p.matching.pruned_far}, {"pruned_distance", p.matching.pruned_distance}, {"pruned_normal", p.matching.pruned_normal},
                                     {"mean_pair_distance_mm", p.matching.mean_distance_mm}, {"factorisations", p.factorisations}, {"seconds", p.seconds}});
             }
             outcomes.push_back({"biomechanical", b.displacement_mm, b.seconds,

@@ -24,6 +24,7 @@ void MatchingOptions::validate() const
 {
     if (!(distance_fraction > 0 && distance_fraction <= 1)) fail("matching: distance fraction d_t = {} must be in (0, 1]", distance_fraction);
     if (!(normal_agreement >= -1 && normal_agreement <= 1)) fail("matching: normal agreement n_t = {} must be in [-1, 1]", normal_agreement);
+    if (!(max_distance_mm > 0)) fail("matching: the largest pair distance {} mm must be > 0", max_distance_mm);
 }
 
 namespace {
@@ -57,10 +58,13 @@ void check_cloud(const LabelledPointCloud& cloud)
 std::vector<SurfacePair> prune(std::vector<SurfacePair> pairs, const std::vector<Vec3>& x, const LabelledTriangles& source,
                                const LabelledPointCloud& cloud, const MatchingOptions& options, MatchStatistics* statistics)
 {
-    std::map<std::int32_t, double> largest;
-    for (const auto& p : pairs) largest[p.label] = std::max(largest[p.label], p.distance_mm());
     MatchStatistics s;
     s.points = cloud.points.size();
+    const std::size_t before = pairs.size();
+    std::erase_if(pairs, [&](const SurfacePair& p) { return !(p.distance_mm() <= options.max_distance_mm); });
+    s.pruned_far = before - pairs.size();
+    std::map<std::int32_t, double> largest;
+    for (const auto& p : pairs) largest[p.label] = std::max(largest[p.label], p.distance_mm());
     std::vector<SurfacePair> kept;
     kept.reserve(pairs.size());
     for (const auto& p : pairs) {

@@ -100,7 +100,10 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
             const auto match_start = std::chrono::steady_clock::now();
             pairs = matcher.match(x, cloud, options.matching, &report.matching);
             result.matching_s += seconds_since(match_start);
-            if (pairs.empty()) fail("surface registration: no pair left after pruning at plateau {} (cloud far from the model?)", plateau);
+            if (pairs.empty())
+                fail("surface registration: no pair left after pruning at plateau {}: {} of {} cloud points lie farther than {} mm from the model's "
+                     "surface (is the cloud in the model's space, mm, LPS?)",
+                     plateau, report.matching.pruned_far, report.matching.points, options.matching.max_distance_mm);
             std::fill(forces.begin(), forces.end(), 0.0);
             std::fill(stiffness.begin(), stiffness.end(), 0.0);
             accumulate_pair_forces(pairs, matcher.source(), report.stiffness_n, options.force, forces, &stiffness);
@@ -164,24 +167,48 @@ RigidSurfaceResult register_surface_rigid(const std::vector<double>& rest, const
     std::vector<double> x = rest, next(n);
     std::vector<SurfacePair> pairs;
     const auto& triangles = matcher.source().triangles;
+    Mat3 rotation = Mat3::Identity();
+    Vec3 translation = Vec3::Zero();
     for (int iteration = 0; iteration < max_iterations; ++iteration) {
         pairs = use_labels ? matcher.match(x, cloud, matching, &result.matching) : match_unlabelled(x, matcher.source(), cloud, matching, &result.matching);
-        if (pairs.size() < 3) fail("rigid surface registration: {} pair(s) after pruning; at least 3 are needed", pairs.size());
-        // The paired model points in the rest configuration, fitted onto their targets directly.
-        Eigen::Matrix3Xd from(3, static_cast<Eigen::Index>(pairs.size())), to(3, static_cast<Eigen::Index>(pairs.size()));
-        for (std::size_t k = 0; k < pairs.size(); ++k) {
-            const auto& tri = triangles[static_cast<std::size_t>(pairs[k].triangle)];
-            Vec3 p = Vec3::Zero();
-            for (int c = 0; c < 3; ++c) p += pairs[k].weights[c] * Vec3(rest[3 * tri[c]], rest[3 * tri[c] + 1], rest[3 * tri[c] + 2]);
-            from.col(static_cast<Eigen::Index>(k)) = p;
-            to.col(static_cast<Eigen::Index>(k)) = pairs[k].target;
+        if (pairs.size() < 3)
+            fail("rigid surface registration: {} pair(s) after pruning ({} of {} cloud points farther than {} mm from the model's surface); at "
+                 "least 3 are needed",
+                 pairs.size(), result.matching.pruned_far, result.matching.points, matching.max_distance_mm);
+        // Point-to-plane ICP (Chen & Medioni; plain point-to-point ICP crawls along sliding
+        // directions): the small motion (ω, τ) minimising Σ ((ω × s + τ + s − q)·n)² over the pairs,
+        // n the source triangle's current normal, plus 1e-3 × the point-to-point terms, which only
+        // matter where the surface leaves a motion undetermined (a plane, a cylinder).
+        Eigen::Matrix<double, 6, 6> a = Eigen::Matrix<double, 6, 6>::Zero();
+        Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+        const double point_weight = 1e-3;
+        for (const auto& p : pairs) {
+            const auto& tri = triangles[static_cast<std::size_t>(p.triangle)];
+            const Vec3 x0(x[3 * tri[0]], x[3 * tri[0] + 1], x[3 * tri[0] + 2]), x1(x[3 * tri[1]], x[3 * tri[1] + 1], x[3 * tri[1] + 2]),
+                x2(x[3 * tri[2]], x[3 * tri[2] + 1], x[3 * tri[2] + 2]);
+            Vec3 normal = (x1 - x0).cross(x2 - x0);
+            if (normal.norm() > 0) normal.normalize();
+            const Vec3 s = p.source, gap = p.target - p.source;
+            Eigen::Matrix<double, 6, 1> row;
+            row << s.cross(normal), normal;
+            a += row * row.transpose();
+            b += row * gap.dot(normal);
+            for (int d = 0; d < 3; ++d) {
+                const Vec3 e = Vec3::Unit(d);
+                row << s.cross(e), e;
+                a += point_weight * row * row.transpose();
+                b += point_weight * row * gap[d];
+            }
         }
-        const Eigen::Matrix4d t = Eigen::umeyama(from, to, false);
-        result.rotation = t.topLeftCorner<3, 3>();
-        result.translation = t.topRightCorner<3, 1>();
+        const Eigen::Matrix<double, 6, 1> motion = a.ldlt().solve(b);
+        const Vec3 omega = motion.head<3>();
+        const Mat3 step = omega.norm() > 0 ? Mat3(Eigen::AngleAxisd(omega.norm(), omega.normalized())) : Mat3::Identity();
+        // x ↦ step (x) + τ about the origin of the linearisation: compose with the transform so far.
+        rotation = step * rotation;
+        translation = step * translation + Vec3(motion.tail<3>());
         double largest = 0.0;
         for (std::size_t i = 0; i < n; i += 3) {
-            const Vec3 y = result.rotation * Vec3(rest[i], rest[i + 1], rest[i + 2]) + result.translation;
+            const Vec3 y = rotation * Vec3(rest[i], rest[i + 1], rest[i + 2]) + translation;
             largest = std::max(largest, (y - Vec3(x[i], x[i + 1], x[i + 2])).norm());
             for (int d = 0; d < 3; ++d) next[i + d] = y[d];
         }
@@ -192,6 +219,8 @@ RigidSurfaceResult register_surface_rigid(const std::vector<double>& rest, const
             break;
         }
     }
+    result.rotation = rotation;
+    result.translation = translation;
     result.displacement_mm.resize(n);
     for (std::size_t i = 0; i < n; ++i) result.displacement_mm[i] = x[i] - rest[i];
     mark_used(pairs, matcher.source(), result.node_used);

@@ -33,7 +33,7 @@ expect_no_file() {
 expect_ok "--version" "$physreg" --version
 grep -q "physreg 0" "$work/out.txt" && pass || failed "--version prints the version"
 expect_ok "--help" "$physreg" --help
-for sub in mesh coarsen info convert demo phantom estimate register-compression evaluate "landmarks locate" "enrich build" "enrich apply" "bench enrich"; do
+for sub in mesh coarsen info convert demo phantom estimate register-compression register-surface evaluate "landmarks locate" "enrich build" "enrich apply" "bench enrich"; do
   expect_ok "$sub --help" "$physreg" $sub --help
 done
 
@@ -181,6 +181,34 @@ expect_no_file "$work/ph_bad6"
 expect_error "phantom: tool narrower than the facets" "narrower than two surface facets" "$physreg" phantom --preset small --tool-radius 2 -o "$work/ph_bad6"
 expect_no_file "$work/ph_bad6"
 ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
+
+# physreg register-surface (paper 001) on the small phantom's insufflation, then from plain files.
+rs="--log-level warn register-surface --cell-size 10 --max-steps-per-plateau 20"
+expect_ok "register-surface dataset" "$physreg" $rs --dataset "$work/ph" --visible 50 -o "$work/rs" --json
+for f in mesh.vtu displacement.nii.gz landmarks.csv regions.ply registered_surface.ply summary.json; do expect_file "$work/rs/$f"; done
+for key in '"biomechanical"' '"rigid"' '"icp"' '"at_rest"' '"hausdorff_mm"' '"node_tre_mm"' '"plateaus"' '"tre"'; do
+  grep -q "$key" "$work/rs/summary.json" && pass || failed "register-surface summary lacks $key"
+done
+expect_ok "info reads the surface registration field" "$physreg" info "$work/rs/displacement.nii.gz"
+cloud="$work/ph/states/insufflation/partial_surface_050.csv"
+expect_ok "register-surface from a mesh, regions and a cloud" "$physreg" $rs --model "$work/rs/mesh.vtu" --regions "$work/rs/regions.ply" \
+  --cloud "$cloud" --landmarks "$work/ph/rest/landmarks.csv" --landmarks-truth "$work/ph/states/insufflation/landmarks.csv" \
+  --truth-surface "$work/ph/states/insufflation/liver_surface.ply" --method rigid --support posterior -o "$work/rs2"
+grep -q '"method": "rigid"' "$work/rs2/summary.json" && pass || failed "register-surface --method rigid recorded"
+expect_error "register-surface: output exists" "not empty" "$physreg" $rs --dataset "$work/ph" --visible 50 -o "$work/rs"
+expect_error "register-surface: visible fraction not in the dataset" "no partial surface with 30 % visible" "$physreg" $rs --dataset "$work/ph" -o "$work/rs_bad1"
+expect_no_file "$work/rs_bad1"
+expect_error "register-surface: cloud label without region" "no region with that label" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$cloud" -o "$work/rs_bad2"
+expect_no_file "$work/rs_bad2"
+printf 'x,y,z,label\n' > "$work/empty_cloud.csv"
+expect_error "register-surface: empty cloud" "no points" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$work/empty_cloud.csv" -o "$work/rs_bad3"
+printf 'x,y,z,label\n1,2,nan,0\n' > "$work/nan_cloud.csv"
+expect_error "register-surface: NaN in the cloud" "expected 4 finite values" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$work/nan_cloud.csv" -o "$work/rs_bad4"
+awk -F, '/^#/ || /^x,/ {print; next} {printf "%f,%f,%f,0\n", $1+500, $2, $3}' "$cloud" > "$work/far_cloud.csv"
+expect_error "register-surface: cloud far from the model" "farther than 40 mm" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$work/far_cloud.csv" -o "$work/rs_bad5"
+expect_error "register-surface: unknown method" "--method 'elastic'" "$physreg" $rs --dataset "$work/ph" --visible 50 --method elastic -o "$work/rs_bad6"
+expect_error "register-surface: two model sources" "exactly one of --dataset, --labels and --model" "$physreg" $rs --dataset "$work/ph" --model "$work/rs/mesh.vtu" -o "$work/rs_bad7"
+for d in rs_bad3 rs_bad4 rs_bad5 rs_bad6 rs_bad7; do expect_no_file "$work/$d"; done
 
 # physreg estimate / register-compression / evaluate on the small phantom (≈ 5 mm cells).
 g="--grid 36x27x12"

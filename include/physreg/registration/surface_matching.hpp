@@ -36,6 +36,9 @@ struct MatchingOptions {
     double distance_fraction = 0.9; ///< d_t: keep pairs with d < d_t × the largest pair distance (of that match)
     double normal_agreement = 0.7;  ///< n_t: keep pairs with n_target · n_source ≥ n_t (clouds with normals)
     bool use_normals = true;        ///< false: no normal test even when the cloud has normals
+    /// Pairs longer than this are dropped before the d_t test (a guard against clouds that do not
+    /// belong to the model; not in paper 001). Infinity: no limit.
+    double max_distance_mm = 40.0;
     void validate() const;
 };
 
@@ -49,7 +52,7 @@ struct SurfacePair {
 };
 
 struct MatchStatistics {
-    std::size_t points = 0, kept = 0, pruned_distance = 0, pruned_normal = 0;
+    std::size_t points = 0, kept = 0, pruned_far = 0, pruned_distance = 0, pruned_normal = 0;
     double mean_distance_mm = 0.0, max_distance_mm = 0.0; ///< over kept pairs
 };
 

@@ -7,8 +7,8 @@
 // ends once all are at their maximum (n = max r_j + 1). The pair forces are linearised in each step
 // (BackwardEuler::set_external_stiffness), so large time steps stay stable.
 //
-// Rigid baselines under the same matching: labelled rigid ICP and plain (unlabelled) ICP, each a
-// least-squares rigid motion (Eigen::umeyama) of the model's rest surface points onto their pairs.
+// Rigid baselines under the same matching: labelled rigid ICP and plain (unlabelled) ICP, both
+// point-to-plane (a 6×6 least-squares step per iteration).
 #include "physreg/mechanics/backward_euler.hpp"
 #include "physreg/mechanics/tled_model.hpp"
 #include "physreg/registration/surface_matching.hpp"
@@ -89,7 +89,7 @@ struct RigidSurfaceResult {
     double seconds = 0.0;
 };
 
-/// Iterative closest point: labelled pairs (`use_labels`, the rigid counterpart of the biomechanical
+/// Iterative closest point (point-to-plane): labelled pairs (`use_labels`, the rigid counterpart of the biomechanical
 /// method) or pairs with any triangle (plain ICP); stops when no node moves more than `tolerance_mm`
 /// between iterations or after `max_iterations`.
 RigidSurfaceResult register_surface_rigid(const std::vector<double>& rest_positions_mm, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
