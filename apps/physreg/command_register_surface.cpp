@@ -33,7 +33,8 @@ namespace {
 
 struct Options : CommonOptions {
     std::string dataset, state = "insufflation", labels, model, regions, cloud, landmarks, landmarks_truth, truth_surface, output;
-    std::string liver_labels, method = "biomechanical", material = "healthy", support = "none";
+    std::string liver_labels, method = "biomechanical", material = "healthy", support = "none", model_kind = "homogeneous";
+    double capsule_thickness = MembraneMaterial{}.thickness_mm;
     int visible = 30;
     std::optional<double> notch_x, young_modulus;
     double poisson = 0.45, cell_size = 7.0, field_spacing = 2.0;
@@ -240,6 +241,9 @@ void add_subcommand_register_surface(CLI::App& app)
     sub->add_option("--landmarks-truth", o->landmarks_truth, "Their true deformed positions (same names): TRE in the summary");
     sub->add_option("--truth-surface", o->truth_surface, "The true deformed liver surface (STL/PLY/OBJ): Hausdorff distance in the summary");
     sub->add_option("--method", o->method, "biomechanical (default), rigid (labelled rigid ICP) or icp (plain ICP); all three are reported");
+    sub->add_option("--model-kind", o->model_kind, "homogeneous (default: parenchyma only) or heterogeneous (plus Glisson's capsule: a membrane "
+                                                  "of 8 000 kPa on the surface, paper 001)");
+    sub->add_option("--capsule-thickness", o->capsule_thickness, "Heterogeneous model: capsule thickness, mm (default 0.1)");
     sub->add_option("--material", o->material, "healthy (E 3.5 kPa, default) or cirrhotic (30 kPa), paper 001");
     sub->add_option("--young-modulus", o->young_modulus, "Parenchyma Young's modulus, Pa (instead of --material)");
     sub->add_option("--poisson", o->poisson, "Poisson's ratio (default 0.45)");
@@ -275,6 +279,14 @@ void add_subcommand_register_surface(CLI::App& app)
         tled.law = MaterialLaw::corotational;
         const TissueTable tissues = homogeneous_liver_tissues(E, o->poisson);
         const TledModel model(in.mesh, tissues, tled);
+        std::optional<Membrane> capsule;
+        if (o->model_kind == "heterogeneous") {
+            MembraneMaterial m;
+            m.thickness_mm = o->capsule_thickness;
+            capsule.emplace(in.surface.triangles, model.rest_positions(), m, "--model-kind heterogeneous: the capsule");
+        } else if (o->model_kind != "homogeneous") {
+            fail("--model-kind '{}': use homogeneous or heterogeneous", o->model_kind);
+        }
 
         SurfaceRegistrationOptions options;
         options.matching.distance_fraction = o->distance_fraction;
@@ -285,6 +297,7 @@ void add_subcommand_register_surface(CLI::App& app)
         options.plateau_tolerance_mm = o->plateau_tolerance;
         options.max_steps_per_plateau = o->max_steps;
         options.newton_iterations_per_step = o->newton_per_step;
+        if (capsule) options.capsule = &*capsule;
         if (o->support == "posterior") {
             options.fixed_nodes = facing_nodes(in.mesh, in.surface, Vec3::UnitY(), 0.5);
             logger()->info("register-surface: {} posterior surface nodes held at rest", options.fixed_nodes.size());
@@ -362,9 +375,13 @@ void add_subcommand_register_surface(CLI::App& app)
         summary["units"] = {{"length", "mm"}, {"force", "N"}, {"time", "s"}, {"young_modulus", "Pa"}};
         summary["inputs"] = in.description;
         summary["method"] = o->method;
-        summary["model"] = {{"kind", "homogeneous"}, {"element", "linear tetrahedra (CGAL Mesh_3), co-rotational"}, {"nodes", in.mesh.node_count()},
+        summary["model"] = {{"kind", o->model_kind}, {"element", "linear tetrahedra (CGAL Mesh_3), co-rotational"}, {"nodes", in.mesh.node_count()},
                             {"tetrahedra", in.mesh.cell_count()}, {"surface_triangles", in.surface.triangles.size()},
                             {"young_modulus_pa", E}, {"poisson_ratio", o->poisson}};
+        if (capsule)
+            summary["model"]["capsule"] = {{"element", "co-rotational constant-strain triangles (plane stress)"}, {"triangles", capsule->size()},
+                                           {"young_modulus_pa", MembraneMaterial{}.young_modulus_pa}, {"poisson_ratio", MembraneMaterial{}.poisson_ratio},
+                                           {"thickness_mm", o->capsule_thickness}, {"area_mm2", capsule->total_area_mm2()}};
         if (in.quality)
             summary["model"]["quality"] = {{"min_dihedral_deg", in.quality->min_dihedral_deg}, {"max_dihedral_deg", in.quality->max_dihedral_deg},
                                            {"min_radius_ratio", in.quality->min_radius_ratio}, {"mean_edge_mm", in.quality->mean_edge_mm}};

@@ -184,6 +184,14 @@ void BackwardEuler::set_external_stiffness(std::vector<double> diagonal)
     m_external_stiffness = std::move(diagonal);
 }
 
+void BackwardEuler::set_membrane(const Membrane* membrane)
+{
+    m_membrane = membrane;
+    m_have_factor = false;
+    BackwardEulerStep scratch;
+    if (!forces_if_valid(m_u, m_force, scratch)) fail("backward Euler: the current state has an inverted element");
+}
+
 void BackwardEuler::set_state(const std::vector<double>& u, const std::vector<double>& v, double time_s)
 {
     if (u.size() != m_u.size() || v.size() != m_v.size())
@@ -206,13 +214,19 @@ double BackwardEuler::kinetic_energy_mj() const
 
 double BackwardEuler::strain_energy_mj() const
 {
-    return m_assembler.energy(m_u.data()).energy_mj;
+    double energy = m_assembler.energy(m_u.data()).energy_mj;
+    if (m_membrane) {
+        std::vector<double> scratch(m_u.size(), 0.0);
+        energy += m_membrane->add_forces(m_u.data(), scratch.data());
+    }
+    return energy;
 }
 
 bool BackwardEuler::forces_if_valid(const std::vector<double>& u, std::vector<double>& f, BackwardEulerStep& stats) const
 {
     const auto start = std::chrono::steady_clock::now();
     const Assembly a = m_assembler.assemble(u.data(), f.data(), nullptr);
+    if (m_membrane && a.inverted_element < 0) m_membrane->add_forces(u.data(), f.data());
     stats.force_s += seconds_since(start);
     if (a.inverted_element >= 0) return false;
     if (a.non_finite_element >= 0)
@@ -226,6 +240,7 @@ void BackwardEuler::factorise_jacobian(const std::vector<double>& u, BackwardEul
     auto start = std::chrono::steady_clock::now();
     std::vector<double> scratch(u.size());
     const Assembly a = m_assembler.assemble(u.data(), scratch.data(), &m_k);
+    if (m_membrane && a.inverted_element < 0) m_membrane->add_stiffness(u.data(), m_assembler, m_k.valuePtr());
     if (a.inverted_element >= 0)
         fail("backward Euler: element {} inverted at t = {:.6g} s", a.inverted_element, m_time + m_options.time_step_s);
     if (a.non_finite_element >= 0)

@@ -1,0 +1,155 @@
+#!/usr/bin/python3
+# The study of paper 001 on physreg's phantom: registration of the liver model to partial
+# intra-operative surfaces of the insufflated liver (healthy and cirrhotic materials, two seeds
+# each, plus one real liver from ../shared/data when present), visible fractions 50 … 10 %,
+# the biomechanical method (free-floating as paper 001, and with the posterior surface held)
+# against rigid / ICP and the at-rest error. Ground truth: the phantom's Mooney–Rivlin tetrahedra
+# (CGAL mesh of its own, stiff lesions and vessels, drawn moduli) solved by Newton; the registering
+# model: homogeneous co-rotational tetrahedra with the nominal modulus, backward Euler.
+#
+# Usage: /usr/bin/python3 scripts/study_surface.py [--quick] [--physreg build/bin/physreg] WORK_DIR
+# Writes WORK_DIR/study.json and, unless --no-docs, docs/figures/surface_study_*.png and
+# docs/results/surface_study.{json,md}. Needs matplotlib (Debian python3-matplotlib).
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+parser = argparse.ArgumentParser()
+parser.add_argument("work")
+parser.add_argument("--physreg", default=os.path.join(ROOT, "build", "bin", "physreg"))
+parser.add_argument("--quick", action="store_true", help="small preset, two cases, three fractions (a smoke run)")
+parser.add_argument("--no-docs", action="store_true")
+args = parser.parse_args()
+os.makedirs(os.path.join(args.work, "runs"), exist_ok=True)
+
+NOMINAL_E = {"healthy": 3500.0, "cirrhotic": 30000.0}
+PRESSURE_FRACTION = 0.05  # insufflation pressure as a fraction of the nominal parenchyma modulus
+SHARED = os.path.join(os.path.dirname(ROOT), "shared", "data")
+
+cases = []
+if args.quick:
+    fractions = [50, 10]
+    for material in ("healthy", "cirrhotic"):
+        cases.append({"name": f"small-{material}-2", "material": material, "seed": 2,
+                      "phantom": ["--preset", "small"]})
+else:
+    fractions = [50, 40, 30, 20, 10]
+    for material in ("healthy", "cirrhotic"):
+        for seed in (2, 3):
+            cases.append({"name": f"cirs057a-{material}-{seed}", "material": material, "seed": seed, "phantom": []})
+    msd = os.path.join(SHARED, "msd-hepaticvessel-liver-vessel-masks")
+    if os.path.isdir(msd):
+        cases.append({"name": "msd002-healthy-2", "material": "healthy", "seed": 2,
+                      "phantom": ["--from-labels", os.path.join(msd, "hepaticvessel_002_liver.nii.gz"), "--label-roles", "liver=1",
+                                  "--vessel-mask", os.path.join(msd, "hepaticvessel_002_vsnet.nii.gz")]})
+    else:
+        print("note: ../shared/data absent, the real-liver case is skipped", file=sys.stderr)
+
+
+def run(command):
+    started = time.time()
+    result = subprocess.run(command, capture_output=True, text=True)
+    if result.returncode != 0:
+        sys.exit(f"failed ({result.returncode}): {' '.join(command)}\n{result.stderr[-3000:]}")
+    return time.time() - started
+
+
+rows = []
+for case in cases:
+    dataset = os.path.join(args.work, case["name"])
+    if not os.path.exists(os.path.join(dataset, "manifest.json")):
+        pressure = PRESSURE_FRACTION * NOMINAL_E[case["material"]]
+        seconds = run([args.physreg, "--log-level", "warn", "phantom", *case["phantom"], "--materials", case["material"], "--seed", str(case["seed"]),
+                       "--organs-only", "--depths", "5", "--no-calculix", "--insufflation-pa", str(pressure), "-o", dataset, "--force"])
+        print(f"{case['name']}: phantom {seconds:.0f} s", file=sys.stderr)
+    manifest = json.load(open(os.path.join(dataset, "manifest.json")))
+    insufflation = next(s for s in manifest["states"] if s["name"] == "insufflation")
+    truth_e = next(t["young_modulus_pa"] for t in manifest["ground_truth"]["tissues"] if t["name"] == "parenchyma")
+    for visible in fractions:
+        for support in ("none", "posterior"):
+            out = os.path.join(args.work, "runs", f"{case['name']}_{visible:02d}_{support}")
+            run([args.physreg, "--log-level", "warn", "register-surface", "--dataset", dataset, "--visible", str(visible), "--support", support,
+                 "--material", case["material"], "-o", out, "--force"])
+            summary = json.load(open(os.path.join(out, "summary.json")))
+            for method, m in summary["methods"].items():
+                name = method if method != "biomechanical" else ("biomechanical" if support == "none" else "biomechanical+support")
+                if method != "biomechanical" and support == "posterior":
+                    continue  # the baselines do not depend on the support
+                rows.append({"case": case["name"], "material": case["material"], "seed": case["seed"], "visible": visible, "method": name,
+                             "truth_parenchyma_e_pa": truth_e, "max_truth_displacement_mm": insufflation.get("max_displacement_mm"),
+                             "internal_tre_mm": m["tre"]["internal"]["mean_mm"], "surface_tre_mm": m["tre"]["surface"]["mean_mm"],
+                             "node_tre_mm": m["node_tre_mm"]["mean"], "node_tre_max_mm": m["node_tre_mm"]["max"],
+                             "hausdorff_mean_mm": m["hausdorff_mm"]["mean"], "hausdorff_max_mm": m["hausdorff_mm"]["max"],
+                             "seconds": m["seconds"], "tetrahedra": summary["model"]["tetrahedra"]})
+            print(f"{case['name']} {visible}% {support}: done", file=sys.stderr)
+
+methods = ["at_rest", "rigid", "icp", "biomechanical", "biomechanical+support"]
+
+
+def mean(values):
+    return sum(values) / len(values) if values else float("nan")
+
+
+table = {}
+for method in methods:
+    for visible in fractions:
+        sel = [r for r in rows if r["method"] == method and r["visible"] == visible]
+        table[f"{method}@{visible}"] = {k: mean([r[k] for r in sel]) for k in
+                                        ("internal_tre_mm", "node_tre_mm", "hausdorff_mean_mm", "hausdorff_max_mm", "seconds")}
+study = {"cases": cases, "fractions": fractions, "pressure_fraction_of_nominal_e": PRESSURE_FRACTION, "rows": rows, "means": table}
+json.dump(study, open(os.path.join(args.work, "study.json"), "w"), indent=1)
+
+lines = ["| method | " + " | ".join(f"{v} % visible" for v in fractions) + " |", "|---|" + "---|" * len(fractions)]
+for key, label in (("internal_tre_mm", "internal TRE"), ("node_tre_mm", "hidden-node TRE"), ("hausdorff_mean_mm", "Hausdorff mean"),
+                   ("hausdorff_max_mm", "Hausdorff max"), ("seconds", "time (s)")):
+    lines.append(f"| **{label}** |" + " |" * len(fractions))
+    for method in methods:
+        lines.append(f"| {method} | " + " | ".join(f"{table[f'{method}@{v}'][key]:.2f}" for v in fractions) + " |")
+markdown = "\n".join(lines)
+print(markdown)
+
+if not args.no_docs:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figures = os.path.join(ROOT, "docs", "figures")
+    results = os.path.join(ROOT, "docs", "results")
+    os.makedirs(figures, exist_ok=True)
+    os.makedirs(results, exist_ok=True)
+    json.dump(study, open(os.path.join(results, "surface_study.json"), "w"), indent=1)
+    open(os.path.join(results, "surface_study.md"), "w").write(markdown + "\n")
+    colours = {"at_rest": "0.5", "rigid": "tab:orange", "icp": "tab:red", "biomechanical": "tab:blue", "biomechanical+support": "tab:green"}
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
+    for ax, (key, label) in zip(axes, (("internal_tre_mm", "internal landmark TRE (mm)"), ("node_tre_mm", "TRE at hidden model nodes (mm)"),
+                                       ("hausdorff_mean_mm", "Hausdorff distance, sampled mean (mm)"))):
+        for method in methods:
+            ys = [table[f"{method}@{v}"][key] for v in fractions]
+            spread = [[r[key] for r in rows if r["method"] == method and r["visible"] == v] for v in fractions]
+            lo = [y - min(s) for y, s in zip(ys, spread)]
+            hi = [max(s) - y for y, s in zip(ys, spread)]
+            ax.errorbar(fractions, ys, yerr=[lo, hi], marker="o", capsize=3, label=method, color=colours[method])
+        ax.set_xlabel("visible surface (%)")
+        ax.set_ylabel(label)
+        ax.invert_xaxis()
+        ax.grid(alpha=0.3)
+    axes[0].legend()
+    fig.suptitle(f"Registration to a partial surface of the insufflated liver: mean over {len(cases)} cases (bars: range)")
+    fig.tight_layout()
+    fig.savefig(os.path.join(figures, "surface_study_tre.png"), dpi=110)
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for method in ("rigid", "icp", "biomechanical", "biomechanical+support"):
+        ax.plot(fractions, [table[f"{method}@{v}"]["seconds"] for v in fractions], marker="o", label=method, color=colours[method])
+    ax.set_xlabel("visible surface (%)")
+    ax.set_ylabel("registration time (s, 2 cores)")
+    ax.invert_xaxis()
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(os.path.join(figures, "surface_study_time.png"), dpi=110)
+    print(f"figures in {figures}", file=sys.stderr)
