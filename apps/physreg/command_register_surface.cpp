@@ -18,6 +18,7 @@
 #include "physreg/mesh/point_location.hpp"
 #include "physreg/phantom/dataset.hpp"
 #include "physreg/phantom/landmark_picking.hpp"
+#include "physreg/mechanics/membrane.hpp"
 #include "physreg/registration/surface_model.hpp"
 #include "physreg/registration/surface_registration.hpp"
 
@@ -297,7 +298,7 @@ void add_subcommand_register_surface(CLI::App& app)
         options.plateau_tolerance_mm = o->plateau_tolerance;
         options.max_steps_per_plateau = o->max_steps;
         options.newton_iterations_per_step = o->newton_per_step;
-        if (capsule) options.capsule = &*capsule;
+        if (capsule) options.structures.push_back(&*capsule);
         if (o->support == "posterior") {
             options.fixed_nodes = facing_nodes(in.mesh, in.surface, Vec3::UnitY(), 0.5);
             logger()->info("register-surface: {} posterior surface nodes held at rest", options.fixed_nodes.size());

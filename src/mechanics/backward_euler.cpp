@@ -123,8 +123,22 @@ void BackwardEulerOptions::validate() const
         fail("backward Euler: stale_contraction = {} must be in (0, 1)", stale_contraction);
 }
 
-BackwardEuler::BackwardEuler(const TledModel& model, const BackwardEulerOptions& options, const PenaltyCoupling* coupling)
-    : m_model(model), m_options(options), m_assembler(model, coupling), m_linear([] {
+namespace {
+std::vector<std::vector<std::int32_t>> stencils_of(const std::vector<const AuxiliaryElements*>& auxiliary)
+{
+    std::vector<std::vector<std::int32_t>> all;
+    for (const auto* a : auxiliary) {
+        if (!a) fail("backward Euler: null auxiliary elements");
+        auto s = a->stencils();
+        all.insert(all.end(), std::make_move_iterator(s.begin()), std::make_move_iterator(s.end()));
+    }
+    return all;
+}
+} // namespace
+
+BackwardEuler::BackwardEuler(const TledModel& model, const BackwardEulerOptions& options, const PenaltyCoupling* coupling,
+                             std::vector<const AuxiliaryElements*> auxiliary)
+    : m_model(model), m_options(options), m_auxiliary(std::move(auxiliary)), m_assembler(model, coupling, stencils_of(m_auxiliary)), m_linear([] {
           LinearSolverOptions linear;
           linear.kind = LinearSolverKind::cholmod;
           return linear;
@@ -145,6 +159,7 @@ BackwardEuler::BackwardEuler(const TledModel& model, const BackwardEulerOptions&
     m_force.assign(n, 0.0);
     m_constrained.assign(n, 0);
     m_assembler.assemble(m_u.data(), m_force.data(), nullptr);
+    for (const auto* a : m_auxiliary) a->add_forces(m_u.data(), m_force.data());
 }
 
 BackwardEuler::~BackwardEuler() = default;
@@ -184,14 +199,6 @@ void BackwardEuler::set_external_stiffness(std::vector<double> diagonal)
     m_external_stiffness = std::move(diagonal);
 }
 
-void BackwardEuler::set_membrane(const Membrane* membrane)
-{
-    m_membrane = membrane;
-    m_have_factor = false;
-    BackwardEulerStep scratch;
-    if (!forces_if_valid(m_u, m_force, scratch)) fail("backward Euler: the current state has an inverted element");
-}
-
 void BackwardEuler::set_state(const std::vector<double>& u, const std::vector<double>& v, double time_s)
 {
     if (u.size() != m_u.size() || v.size() != m_v.size())
@@ -215,10 +222,8 @@ double BackwardEuler::kinetic_energy_mj() const
 double BackwardEuler::strain_energy_mj() const
 {
     double energy = m_assembler.energy(m_u.data()).energy_mj;
-    if (m_membrane) {
-        std::vector<double> scratch(m_u.size(), 0.0);
-        energy += m_membrane->add_forces(m_u.data(), scratch.data());
-    }
+    std::vector<double> scratch(m_u.size(), 0.0);
+    for (const auto* a : m_auxiliary) energy += a->add_forces(m_u.data(), scratch.data());
     return energy;
 }
 
@@ -226,7 +231,8 @@ bool BackwardEuler::forces_if_valid(const std::vector<double>& u, std::vector<do
 {
     const auto start = std::chrono::steady_clock::now();
     const Assembly a = m_assembler.assemble(u.data(), f.data(), nullptr);
-    if (m_membrane && a.inverted_element < 0) m_membrane->add_forces(u.data(), f.data());
+    if (a.inverted_element < 0)
+        for (const auto* x : m_auxiliary) x->add_forces(u.data(), f.data());
     stats.force_s += seconds_since(start);
     if (a.inverted_element >= 0) return false;
     if (a.non_finite_element >= 0)
@@ -240,7 +246,8 @@ void BackwardEuler::factorise_jacobian(const std::vector<double>& u, BackwardEul
     auto start = std::chrono::steady_clock::now();
     std::vector<double> scratch(u.size());
     const Assembly a = m_assembler.assemble(u.data(), scratch.data(), &m_k);
-    if (m_membrane && a.inverted_element < 0) m_membrane->add_stiffness(u.data(), m_assembler, m_k.valuePtr());
+    if (a.inverted_element < 0)
+        for (const auto* x : m_auxiliary) x->add_stiffness(u.data(), m_assembler, m_k.valuePtr());
     if (a.inverted_element >= 0)
         fail("backward Euler: element {} inverted at t = {:.6g} s", a.inverted_element, m_time + m_options.time_step_s);
     if (a.non_finite_element >= 0)

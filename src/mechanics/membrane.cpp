@@ -53,6 +53,13 @@ Membrane::Membrane(const std::vector<std::array<std::int32_t, 3>>& triangles, co
     }
 }
 
+std::vector<std::vector<std::int32_t>> Membrane::stencils() const
+{
+    std::vector<std::vector<std::int32_t>> out;
+    for (const auto& e : m_triangles) out.push_back({e.nodes[0], e.nodes[1], e.nodes[2]});
+    return out;
+}
+
 double Membrane::total_area_mm2() const
 {
     double sum = 0.0;

@@ -9,7 +9,8 @@
 
 namespace physreg {
 
-StiffnessAssembler::StiffnessAssembler(const TledModel& model, const PenaltyCoupling* coupling)
+StiffnessAssembler::StiffnessAssembler(const TledModel& model, const PenaltyCoupling* coupling,
+                                       const std::vector<std::vector<std::int32_t>>& extra_stencils)
     : m_model(model), m_coupling(coupling && !coupling->empty() ? coupling : nullptr)
 {
     if (model.options().averaged_nodal_pressure)
@@ -32,6 +33,11 @@ StiffnessAssembler::StiffnessAssembler(const TledModel& model, const PenaltyCoup
             const auto entries = m_coupling->point_entries(i);
             for (const auto& p : entries)
                 for (const auto& q : entries) adjacency[q.node].push_back(p.node);
+        }
+    for (const auto& group : extra_stencils)
+        for (auto p : group) {
+            if (p < 0 || static_cast<std::size_t>(p) >= n) fail("stiffness pattern: stencil node {} outside the model's {} nodes", p, n);
+            for (auto q : group) adjacency[q].push_back(p);
         }
     m_node_begin.assign(n + 1, 0);
     for (std::size_t j = 0; j < n; ++j) {

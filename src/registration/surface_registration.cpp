@@ -79,8 +79,7 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
 
     BackwardEulerOptions dynamics = options.dynamics;
     dynamics.fixed_newton_iterations = options.newton_iterations_per_step;
-    BackwardEuler integrator(model, dynamics);
-    if (options.capsule) integrator.set_membrane(options.capsule);
+    BackwardEuler integrator(model, dynamics, nullptr, options.structures);
     const std::size_t n = 3 * model.node_count();
     const std::vector<double>& rest = model.rest_positions();
     SurfaceRegistrationResult result;

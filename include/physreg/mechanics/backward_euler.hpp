@@ -17,7 +17,7 @@
 // needs one force evaluation and one pair of triangular solves per iteration.
 #include "physreg/mechanics/linear_solver.hpp"
 #include "physreg/mechanics/loads.hpp"
-#include "physreg/mechanics/membrane.hpp"
+#include "physreg/mechanics/auxiliary_elements.hpp"
 #include "physreg/mechanics/stiffness_assembly.hpp"
 
 #include <memory>
@@ -73,7 +73,10 @@ class BackwardEuler {
 public:
     /// The coupling (may be null) must outlive the integrator. Throws Error for bad options and for
     /// the averaged-nodal-pressure tetrahedron (no tangent).
-    BackwardEuler(const TledModel& model, const BackwardEulerOptions& options, const PenaltyCoupling* coupling = nullptr);
+    /// `auxiliary` (paper 001's capsule membrane, vessel beams) must outlive the integrator too;
+    /// their forces and stiffness join the model's.
+    BackwardEuler(const TledModel& model, const BackwardEulerOptions& options, const PenaltyCoupling* coupling = nullptr,
+                  std::vector<const AuxiliaryElements*> auxiliary = {});
     ~BackwardEuler();
 
     /// Constraints (displacement × load factor at the step's end time), nodal forces × load factor.
@@ -89,9 +92,6 @@ public:
     /// The next step factorises a fresh Jacobian (fixed-iteration runs with a stale tangent never
     /// decide that themselves).
     void refresh_tangent() { m_have_factor = false; }
-    /// A membrane on the model's surface (paper 001's capsule), or null; it must outlive the
-    /// integrator. Its forces and rotated stiffness join the model's from the next evaluation.
-    void set_membrane(const Membrane* membrane);
 
     /// Advances by one time step. Throws Error for an inverted element (naming it and the time), a
     /// non-finite force, or a step that does not converge even with a fresh tangent every iteration.
@@ -115,13 +115,13 @@ private:
 
     const TledModel& m_model;
     BackwardEulerOptions m_options;
+    std::vector<const AuxiliaryElements*> m_auxiliary;
     StiffnessAssembler m_assembler;
     SparseMatrix m_mass, m_k, m_jacobian;
     SymmetricSolver m_linear;
     Loads m_loads;
     Vec3 m_gravity = Vec3::Zero();
     std::vector<double> m_external_stiffness; ///< empty or 3 per node, N/mm
-    const Membrane* m_membrane = nullptr;
     std::vector<std::uint8_t> m_constrained;
     std::vector<double> m_u, m_v, m_force; ///< m_force = f(m_u)
     double m_time = 0.0;

@@ -9,6 +9,7 @@
 //
 // The membrane adds into a StiffnessAssembler's pattern: every pair of corners must share a model
 // element, which holds for triangles that are faces of the volume mesh (its boundary).
+#include "physreg/mechanics/auxiliary_elements.hpp"
 #include "physreg/mechanics/stiffness_assembly.hpp"
 
 #include <array>
@@ -24,7 +25,7 @@ struct MembraneMaterial {
     void validate(const std::string& what) const;
 };
 
-class Membrane {
+class Membrane : public AuxiliaryElements {
 public:
     /// Triangles over model node ids at their rest positions (3 per node, mm). Throws Error naming
     /// `what` for bad materials, node ids out of range or degenerate triangles.
@@ -32,9 +33,10 @@ public:
              const std::string& what);
 
     /// Adds the internal forces (N) at displacement u (mm) into f and returns the energy (mJ).
-    double add_forces(const double* u, double* f) const;
+    double add_forces(const double* u, double* f) const override;
     /// Adds the rotated stiffness (N/mm) into `values` of a matrix in `assembler`'s pattern.
-    void add_stiffness(const double* u, const StiffnessAssembler& assembler, double* values) const;
+    void add_stiffness(const double* u, const StiffnessAssembler& assembler, double* values) const override;
+    std::vector<std::vector<std::int32_t>> stencils() const override;
     std::size_t size() const { return m_triangles.size(); }
     double total_area_mm2() const;
 

@@ -37,8 +37,10 @@ struct Assembly {
 class StiffnessAssembler {
 public:
     /// Throws Error for the averaged-nodal-pressure tetrahedron (it has no tangent here) and for a
-    /// coupling built for another node count.
-    StiffnessAssembler(const TledModel& model, const PenaltyCoupling* coupling = nullptr);
+    /// coupling built for another node count. `extra_stencils`: further node groups whose pairs
+    /// need entries (auxiliary elements: membranes, embedded beams).
+    StiffnessAssembler(const TledModel& model, const PenaltyCoupling* coupling = nullptr,
+                       const std::vector<std::vector<std::int32_t>>& extra_stencils = {});
 
     /// Internal forces f (N, 3 per node, overwritten), the energy, and — when `stiffness` is given —
     /// the tangent (its values overwritten; it must come from make_matrix()). u: 3 per node, mm.

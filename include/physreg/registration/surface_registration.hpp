@@ -33,9 +33,9 @@ struct SurfaceRegistrationOptions {
     /// start (linearised backward Euler, as SOFA's EulerImplicit: the equilibrium is the same, only
     /// the path differs); 0: each step solved to the dynamics' residual tolerance.
     int newton_iterations_per_step = 1;
-    /// Paper 001's heterogeneous model: Glisson's capsule on the surface (null: homogeneous). It
-    /// must outlive the call.
-    const Membrane* capsule = nullptr;
+    /// Paper 001's heterogeneous model: Glisson's capsule on the surface and the vessel beams
+    /// (empty: homogeneous). They must outlive the call.
+    std::vector<const AuxiliaryElements*> structures;
     /// Nodes held at rest (anatomical support, e.g. the posterior surface); empty: none, as paper 001.
     std::vector<std::int32_t> fixed_nodes;
     void validate() const;

@@ -153,8 +153,8 @@ TEST(Membrane, ASkinOnALongBlockAddsItsAxialStiffnessInTension)
     quasi_static.residual_tolerance = 1e-9;
     quasi_static.max_newton_iterations = 30;
     const auto axial_force = [&](bool with_skin) {
-        BackwardEuler integrator(model, quasi_static);
-        if (with_skin) integrator.set_membrane(&membrane);
+        BackwardEuler integrator(model, quasi_static, nullptr,
+                                 with_skin ? std::vector<const AuxiliaryElements*>{&membrane} : std::vector<const AuxiliaryElements*>{});
         integrator.set_loads(test::uniaxial_loads(mesh, length, width, height, 1 + eps));
         integrator.step();
         const StiffnessAssembler assembler(model);
