@@ -18,6 +18,7 @@
 #include "physreg/mesh/point_location.hpp"
 #include "physreg/phantom/dataset.hpp"
 #include "physreg/phantom/landmark_picking.hpp"
+#include "physreg/mechanics/embedded_beams.hpp"
 #include "physreg/mechanics/membrane.hpp"
 #include "physreg/registration/surface_model.hpp"
 #include "physreg/registration/surface_registration.hpp"
@@ -35,7 +36,8 @@ namespace {
 struct Options : CommonOptions {
     std::string dataset, state = "insufflation", labels, model, regions, cloud, landmarks, landmarks_truth, truth_surface, output;
     std::string liver_labels, method = "biomechanical", material = "healthy", support = "none", model_kind = "homogeneous";
-    double capsule_thickness = MembraneMaterial{}.thickness_mm;
+    double capsule_thickness = MembraneMaterial{}.thickness_mm, vessel_scale = 1.0, vessel_radius = 1.5;
+    std::string vessels;
     int visible = 30;
     std::optional<double> notch_x, young_modulus;
     double poisson = 0.45, cell_size = 7.0, field_spacing = 2.0;
@@ -55,6 +57,7 @@ struct Inputs {
     std::optional<VolumeMesh> truth_mesh;   ///< dataset: the ground-truth state's mesh with its nodal displacement
     std::vector<double> truth_displacement;
     std::optional<ImageGeometry> field_geometry;
+    std::vector<VesselBranch> vessels;      ///< centrelines for the heterogeneous model (may stay empty)
     json description;
 };
 
@@ -105,6 +108,10 @@ Inputs load_inputs(const Options& o)
         if (!u || u->components != 3) fail("register-surface: the ground-truth mesh of state {} has no 3-component 'displacement'", o.state);
         in.truth_displacement = u->values;
         in.field_geometry = labels.geometry;
+        if (!o.vessels.empty())
+            in.vessels = read_vessel_centrelines(o.vessels, o.vessel_scale, o.vessel_radius);
+        else if (rest.files.count("vessel_centrelines"))
+            in.vessels = read_vessel_centrelines(dataset.path(rest.files.at("vessel_centrelines")), 1.0, 1.0);
         in.description = {{"dataset", o.dataset}, {"state", o.state}, {"visible_percent", o.visible}, {"cloud", surface->second.first},
                           {"regions", "from the rest label map (anatomical rule; notch from the label map)"}};
         return in;
@@ -143,6 +150,10 @@ Inputs load_inputs(const Options& o)
     }
     in.cloud = read_point_cloud(o.cloud);
     in.description["cloud"] = o.cloud;
+    if (!o.vessels.empty()) {
+        in.vessels = read_vessel_centrelines(o.vessels, o.vessel_scale, o.vessel_radius);
+        in.description["vessels"] = o.vessels;
+    }
     if (!o.landmarks.empty()) in.landmarks = read_landmarks(o.landmarks);
     if (!o.landmarks_truth.empty()) {
         if (!in.landmarks) fail("register-surface: --landmarks-truth needs --landmarks (their rest positions)");
@@ -245,6 +256,10 @@ void add_subcommand_register_surface(CLI::App& app)
     sub->add_option("--model-kind", o->model_kind, "homogeneous (default: parenchyma only) or heterogeneous (plus Glisson's capsule: a membrane "
                                                   "of 8 000 kPa on the surface, paper 001)");
     sub->add_option("--capsule-thickness", o->capsule_thickness, "Heterogeneous model: capsule thickness, mm (default 0.1)");
+    sub->add_option("--vessels", o->vessels, "Heterogeneous model: vessel centrelines (CSV branch,x,y,z,radius, or text 'x y z' lines with "
+                                             "blank lines between branches); --dataset brings the phantom's own");
+    sub->add_option("--vessel-scale", o->vessel_scale, "--vessels: factor to mm (e.g. 1000 for metres; default 1)");
+    sub->add_option("--vessel-radius", o->vessel_radius, "--vessels: radius of files without radii, mm (default 1.5)");
     sub->add_option("--material", o->material, "healthy (E 3.5 kPa, default) or cirrhotic (30 kPa), paper 001");
     sub->add_option("--young-modulus", o->young_modulus, "Parenchyma Young's modulus, Pa (instead of --material)");
     sub->add_option("--poisson", o->poisson, "Poisson's ratio (default 0.45)");
@@ -281,12 +296,19 @@ void add_subcommand_register_surface(CLI::App& app)
         const TissueTable tissues = homogeneous_liver_tissues(E, o->poisson);
         const TledModel model(in.mesh, tissues, tled);
         std::optional<Membrane> capsule;
+        std::optional<EmbeddedBeams> beams;
         if (o->model_kind == "heterogeneous") {
             MembraneMaterial m;
             m.thickness_mm = o->capsule_thickness;
             capsule.emplace(in.surface.triangles, model.rest_positions(), m, "--model-kind heterogeneous: the capsule");
+            if (in.vessels.empty())
+                logger()->warn("register-surface: no vessel centrelines (--vessels): the heterogeneous model has the capsule only");
+            else
+                beams.emplace(in.mesh, in.vessels, BeamMaterial{}, o->cell_size, "--model-kind heterogeneous: the vessel beams");
         } else if (o->model_kind != "homogeneous") {
             fail("--model-kind '{}': use homogeneous or heterogeneous", o->model_kind);
+        } else if (!o->vessels.empty()) {
+            fail("--vessels: only the heterogeneous model has vessels (add --model-kind heterogeneous)");
         }
 
         SurfaceRegistrationOptions options;
@@ -299,6 +321,7 @@ void add_subcommand_register_surface(CLI::App& app)
         options.max_steps_per_plateau = o->max_steps;
         options.newton_iterations_per_step = o->newton_per_step;
         if (capsule) options.structures.push_back(&*capsule);
+        if (beams) options.structures.push_back(&*beams);
         if (o->support == "posterior") {
             options.fixed_nodes = facing_nodes(in.mesh, in.surface, Vec3::UnitY(), 0.5);
             logger()->info("register-surface: {} posterior surface nodes held at rest", options.fixed_nodes.size());
@@ -383,6 +406,10 @@ void add_subcommand_register_surface(CLI::App& app)
             summary["model"]["capsule"] = {{"element", "co-rotational constant-strain triangles (plane stress)"}, {"triangles", capsule->size()},
                                            {"young_modulus_pa", MembraneMaterial{}.young_modulus_pa}, {"poisson_ratio", MembraneMaterial{}.poisson_ratio},
                                            {"thickness_mm", o->capsule_thickness}, {"area_mm2", capsule->total_area_mm2()}};
+        if (beams)
+            summary["model"]["vessels"] = {{"element", "co-rotational Timoshenko beams embedded in the tetrahedra"}, {"elements", beams->size()},
+                                           {"length_mm", beams->total_length_mm()}, {"segments_outside_model", beams->dropped_elements()},
+                                           {"young_modulus_pa", BeamMaterial{}.young_modulus_pa}, {"poisson_ratio", BeamMaterial{}.poisson_ratio}};
         if (in.quality)
             summary["model"]["quality"] = {{"min_dihedral_deg", in.quality->min_dihedral_deg}, {"max_dihedral_deg", in.quality->max_dihedral_deg},
                                            {"min_radius_ratio", in.quality->min_radius_ratio}, {"mean_edge_mm", in.quality->mean_edge_mm}};

@@ -28,6 +28,16 @@ struct Tube {
 // Liver frame → body frame.
 const Vec3 liver_offset(-30.0, -5.0, 0.0);
 
+// Vessel tree in the liver frame: a portal-like trunk from the hilum, two main branches, each
+// splitting again; radii decrease along every path.
+std::vector<Tube> vessel_tubes()
+{
+    const Vec3 hilum(-10, 25, -25), right_fork(-50, 12, -8), left_fork(35, 0, -5), right_mid(-72, 6, 2);
+    return {{hilum, right_fork, 4.5, 3.5},          {right_fork, {-85, 0, 12}, 3.2, 1.8}, {right_fork, {-50, -30, 10}, 2.8, 1.6},
+            {hilum, left_fork, 4.0, 3.0},           {left_fork, {78, -18, 8}, 2.8, 1.5},  {left_fork, {40, -38, 16}, 2.2, 1.4},
+            {right_mid, {-70, 35, -10}, 1.8, 1.2}};
+}
+
 // Three lobes, smooth union (soft minimum of the ellipsoid functions), minus the umbilical cleft.
 bool inside_liver(const Vec3& p_body)
 {
@@ -114,13 +124,7 @@ LabelRoles parse_label_roles(const std::string& text, const std::string& option)
 LabelVolume make_cirs057a_phantom(double voxel_mm)
 {
     if (!(voxel_mm >= 0.5 && voxel_mm <= 6.0)) fail("phantom: voxel size {} mm outside 0.5 … 6 mm", voxel_mm);
-    // Vessel tree in the liver frame: a portal-like trunk from the hilum, two main branches, each
-    // splitting again; radii decrease along every path.
-    const Vec3 hilum(-10, 25, -25), right_fork(-50, 12, -8), left_fork(35, 0, -5), right_mid(-72, 6, 2);
-    const Tube tubes[] = {{hilum, right_fork, 4.5, 3.5},           {right_fork, {-85, 0, 12}, 3.2, 1.8},
-                          {right_fork, {-50, -30, 10}, 2.8, 1.6},  {hilum, left_fork, 4.0, 3.0},
-                          {left_fork, {78, -18, 8}, 2.8, 1.5},     {left_fork, {40, -38, 16}, 2.2, 1.4},
-                          {right_mid, {-70, 35, -10}, 1.8, 1.2}};
+    const auto tubes = vessel_tubes();
     const Ellipsoid lesions[] = {{{-60, 22, 10}, Vec3(7.2, 6.8, 7.0)}, {{-30, -33, -3}, Vec3(7.0, 7.0, 7.0)},
                                  {{48, -24, 6}, Vec3(4.5, 4.5, 4.5)},  {{-70, -10, -12}, Vec3(4.0, 4.0, 4.0)},
                                  {{-20, 10, 18}, Vec3(2.5, 2.5, 2.5)}, {{20, -20, 2}, Vec3(2.5, 2.5, 2.5)}};
@@ -227,6 +231,13 @@ ScalarImage synthesize_mr_intensity(const LabelVolume& labels, const LabelRoles&
                 image.values[v] = static_cast<float>(std::hypot(clean + n1, n2)); // Rician magnitude
             }
     return image;
+}
+
+std::vector<VesselBranch> cirs057a_vessel_centrelines()
+{
+    std::vector<VesselBranch> out;
+    for (const auto& t : vessel_tubes()) out.push_back({{t.a + liver_offset, t.b + liver_offset}, {t.ra, t.rb}});
+    return out;
 }
 
 } // namespace physreg

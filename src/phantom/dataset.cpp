@@ -728,6 +728,10 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
             write_landmarks(f, with_noise(landmarks, spec.landmark_noise_mm, mix_seed(spec.seed, "landmarks/" + name)));
         });
         files["liver_surface"] = write_file(root, dir + "/liver_surface.ply", [&](const fs::path& f) { write_boundary_ply(f, mesh, u, view.liver_surface); });
+        if (name == "rest" && spec.preset != "from-labels")
+            files["vessel_centrelines"] = write_file(root, dir + "/vessel_centrelines.csv", [&](const fs::path& f) {
+                write_vessel_centrelines(f, cirs057a_vessel_centrelines());
+            });
         json surfaces = json::object();
         if (solved) {
             for (const int percent : spec.surface_percentages) {

@@ -7,6 +7,7 @@
 // Coordinates are physical mm in LPS: x towards the patient's left, y posterior, z superior; the
 // phantom lies supine with its flat base at the posterior side, so tools press along +y.
 #include "physreg/image/image_geometry.hpp"
+#include "physreg/mechanics/embedded_beams.hpp"
 
 #include <cstdint>
 #include <set>
@@ -38,6 +39,9 @@ LabelRoles parse_label_roles(const std::string& text, const std::string& option)
 /// radii decreasing from 4.5 to 1.2 mm (longest tube path ≈ 135 mm); spine and two kidneys.
 /// Deterministic. `voxel_mm`: isotropic voxel size, 0.5 … 6 mm.
 LabelVolume make_cirs057a_phantom(double voxel_mm);
+/// The centrelines of its vessel tree (the tubes' axes, radii at both ends), mm, LPS — the
+/// pre-operative vessel model paper 001's heterogeneous liver needs.
+std::vector<VesselBranch> cirs057a_vessel_centrelines();
 
 /// MR-like (T2-weighted look) intensities: per-role means (vessels dark, lesions bright), a
 /// smooth multiplicative bias field (±15 %) and Rician noise (σ = 2 % of the liver's mean), all
