@@ -2,8 +2,9 @@
 # The study of paper 001 on physreg's phantom: registration of the liver model to partial
 # intra-operative surfaces of the insufflated liver (healthy and cirrhotic materials, two seeds
 # each, plus one real liver from ../shared/data when present), visible fractions 50 … 10 %,
-# the biomechanical method (free-floating as paper 001, and with the posterior surface held)
-# against rigid / ICP and the at-rest error. Ground truth: the phantom's Mooney–Rivlin tetrahedra
+# the biomechanical methods — homogeneous and heterogeneous (capsule + vessel beams) models,
+# free-floating as paper 001 or with the posterior surface held — against rigid / ICP and the
+# at-rest error. Ground truth: the phantom's Mooney–Rivlin tetrahedra
 # (CGAL mesh of its own, stiff lesions and vessels, drawn moduli) solved by Newton; the registering
 # model: homogeneous co-rotational tetrahedra with the nominal modulus, backward Euler.
 #
@@ -71,24 +72,24 @@ for case in cases:
     insufflation = next(s for s in manifest["states"] if s["name"] == "insufflation")
     truth_e = next(t["young_modulus_pa"] for t in manifest["ground_truth"]["tissues"] if t["name"] == "parenchyma")
     for visible in fractions:
-        for support in ("none", "posterior"):
-            out = os.path.join(args.work, "runs", f"{case['name']}_{visible:02d}_{support}")
+        for kind, support in (("homogeneous", "none"), ("homogeneous", "posterior"), ("heterogeneous", "none"), ("heterogeneous", "posterior")):
+            out = os.path.join(args.work, "runs", f"{case['name']}_{visible:02d}_{kind}_{support}")
             run([args.physreg, "--log-level", "warn", "register-surface", "--dataset", dataset, "--visible", str(visible), "--support", support,
-                 "--material", case["material"], "-o", out, "--force"])
+                 "--model-kind", kind, "--material", case["material"], "-o", out, "--force"])
             summary = json.load(open(os.path.join(out, "summary.json")))
             for method, m in summary["methods"].items():
-                name = method if method != "biomechanical" else ("biomechanical" if support == "none" else "biomechanical+support")
-                if method != "biomechanical" and support == "posterior":
-                    continue  # the baselines do not depend on the support
+                name = method if method != "biomechanical" else kind + ("" if support == "none" else "+support")
+                if method != "biomechanical" and (support == "posterior" or kind == "heterogeneous"):
+                    continue  # the baselines depend on neither the support nor the model
                 rows.append({"case": case["name"], "material": case["material"], "seed": case["seed"], "visible": visible, "method": name,
                              "truth_parenchyma_e_pa": truth_e, "max_truth_displacement_mm": insufflation.get("max_displacement_mm"),
                              "internal_tre_mm": m["tre"]["internal"]["mean_mm"], "surface_tre_mm": m["tre"]["surface"]["mean_mm"],
                              "node_tre_mm": m["node_tre_mm"]["mean"], "node_tre_max_mm": m["node_tre_mm"]["max"],
                              "hausdorff_mean_mm": m["hausdorff_mm"]["mean"], "hausdorff_max_mm": m["hausdorff_mm"]["max"],
                              "seconds": m["seconds"], "tetrahedra": summary["model"]["tetrahedra"]})
-            print(f"{case['name']} {visible}% {support}: done", file=sys.stderr)
+            print(f"{case['name']} {visible}% {kind} {support}: done", file=sys.stderr)
 
-methods = ["at_rest", "rigid", "icp", "biomechanical", "biomechanical+support"]
+methods = ["at_rest", "rigid", "icp", "homogeneous", "homogeneous+support", "heterogeneous", "heterogeneous+support"]
 
 
 def mean(values):
@@ -124,7 +125,8 @@ if not args.no_docs:
     os.makedirs(results, exist_ok=True)
     json.dump(study, open(os.path.join(results, "surface_study.json"), "w"), indent=1)
     open(os.path.join(results, "surface_study.md"), "w").write(markdown + "\n")
-    colours = {"at_rest": "0.5", "rigid": "tab:orange", "icp": "tab:red", "biomechanical": "tab:blue", "biomechanical+support": "tab:green"}
+    colours = {"at_rest": "0.5", "rigid": "tab:orange", "icp": "tab:red", "homogeneous": "tab:blue", "homogeneous+support": "tab:green",
+               "heterogeneous": "tab:purple", "heterogeneous+support": "tab:olive"}
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
     for ax, (key, label) in zip(axes, (("internal_tre_mm", "internal landmark TRE (mm)"), ("node_tre_mm", "TRE at hidden model nodes (mm)"),
                                        ("hausdorff_mean_mm", "Hausdorff distance, sampled mean (mm)"))):
@@ -143,7 +145,7 @@ if not args.no_docs:
     fig.tight_layout()
     fig.savefig(os.path.join(figures, "surface_study_tre.png"), dpi=110)
     fig, ax = plt.subplots(figsize=(6, 4))
-    for method in ("rigid", "icp", "biomechanical", "biomechanical+support"):
+    for method in ("rigid", "icp", "homogeneous", "homogeneous+support", "heterogeneous", "heterogeneous+support"):
         ax.plot(fractions, [table[f"{method}@{v}"]["seconds"] for v in fractions], marker="o", label=method, color=colours[method])
     ax.set_xlabel("visible surface (%)")
     ax.set_ylabel("registration time (s, 2 cores)")

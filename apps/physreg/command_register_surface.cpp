@@ -34,9 +34,9 @@ using nlohmann::json;
 namespace {
 
 struct Options : CommonOptions {
-    std::string dataset, state = "insufflation", labels, model, regions, cloud, landmarks, landmarks_truth, truth_surface, output;
+    std::string dataset, state = "insufflation", labels, surface, region_seeds, model, regions, cloud, landmarks, landmarks_truth, truth_surface, output;
     std::string liver_labels, method = "biomechanical", material = "healthy", support = "none", model_kind = "homogeneous";
-    double capsule_thickness = MembraneMaterial{}.thickness_mm, vessel_scale = 1.0, vessel_radius = 1.5;
+    double capsule_thickness = MembraneMaterial{}.thickness_mm, vessel_scale = 1.0, vessel_radius = 1.5, region_radius = 15.0, surface_scale = 1.0;
     std::string vessels;
     int visible = 30;
     std::optional<double> notch_x, young_modulus;
@@ -74,10 +74,12 @@ std::set<std::int32_t> parse_label_set(const std::string& text, const std::strin
 Inputs load_inputs(const Options& o)
 {
     Inputs in;
-    const int sources = !o.dataset.empty() + !o.labels.empty() + !o.model.empty();
-    if (sources != 1) fail("register-surface: give exactly one of --dataset, --labels and --model");
+    const int sources = !o.dataset.empty() + !o.labels.empty() + !o.model.empty() + !o.surface.empty();
+    if (sources != 1) fail("register-surface: give exactly one of --dataset, --labels, --surface and --model");
+    if (!o.regions.empty() && !o.region_seeds.empty()) fail("register-surface: give --regions or --region-seeds, not both");
     if (!o.dataset.empty()) {
-        if (!o.cloud.empty() || !o.landmarks.empty() || !o.landmarks_truth.empty() || !o.truth_surface.empty() || !o.regions.empty())
+        if (!o.cloud.empty() || !o.landmarks.empty() || !o.landmarks_truth.empty() || !o.truth_surface.empty() || !o.regions.empty() ||
+            !o.region_seeds.empty())
             fail("register-surface: --dataset provides the cloud, landmarks, regions and truth; leave out --cloud, --landmarks, "
                  "--landmarks-truth, --truth-surface and --regions");
         const PhantomDataset dataset = read_phantom_dataset(o.dataset);
@@ -116,7 +118,7 @@ Inputs load_inputs(const Options& o)
                           {"regions", "from the rest label map (anatomical rule; notch from the label map)"}};
         return in;
     }
-    if (o.cloud.empty()) fail("register-surface: --cloud is required with --labels or --model");
+    if (o.cloud.empty()) fail("register-surface: --cloud is required with --labels, --surface or --model");
     if (!o.labels.empty()) {
         const LabelVolume labels = read_label_volume(o.labels);
         std::set<std::int32_t> liver;
@@ -132,6 +134,15 @@ Inputs load_inputs(const Options& o)
         in.quality = model.quality;
         in.field_geometry = labels.geometry;
         in.description = {{"labels", o.labels}};
+    } else if (!o.surface.empty()) {
+        SurfaceMesh liver = read_surface(o.surface);
+        if (!(o.surface_scale > 0)) fail("--surface-scale {} must be > 0", o.surface_scale);
+        for (auto& v : liver.vertices) v *= o.surface_scale;
+        SurfaceModel model = surface_model_from_surface(liver, o.cell_size, o.notch_x, o.seed, "--surface '" + o.surface + "'");
+        in.mesh = std::move(model.mesh);
+        in.surface = std::move(model.surface);
+        in.quality = model.quality;
+        in.description = {{"surface", o.surface}};
     } else {
         in.mesh = read_volume_mesh(o.model);
         if (in.mesh.cell_type != CellType::tetrahedron) fail("register-surface: --model '{}' must hold tetrahedra (paper 001's model)", o.model);
@@ -143,8 +154,18 @@ Inputs load_inputs(const Options& o)
     if (!o.regions.empty()) {
         in.surface = regions_from_surface(in.mesh, in.surface, read_surface(o.regions), 5.0, "--regions '" + o.regions + "'");
         in.description["regions"] = o.regions;
-    } else if (o.labels.empty() || !o.notch_x) {
-        in.description["regions"] = o.labels.empty() ? "none (all surface)" : "anatomical rule, no umbilical notch (no --notch-x)";
+    } else if (!o.region_seeds.empty()) {
+        std::vector<RegionSeed> seeds;
+        for (const auto& l : read_landmarks(o.region_seeds)) {
+            const std::string prefix = l.name.substr(0, 2);
+            if (prefix != "UN" && prefix != "AM")
+                fail("--region-seeds '{}': landmark '{}' must be named UN… (umbilical notch) or AM… (anterior margin)", o.region_seeds, l.name);
+            seeds.push_back({prefix == "UN" ? feature_umbilical_notch : feature_anterior_margin, l.position});
+        }
+        in.surface = regions_from_seeds(in.mesh, in.surface, seeds, o.region_radius, 10.0, "--region-seeds '" + o.region_seeds + "'");
+        in.description["regions"] = fmt::format("grown {} mm along the surface from the points of {}", o.region_radius, o.region_seeds);
+    } else if ((o.labels.empty() && o.surface.empty()) || !o.notch_x) {
+        in.description["regions"] = o.labels.empty() && o.surface.empty() ? "none (all surface)" : "anatomical rule, no umbilical notch (no --notch-x)";
     } else {
         in.description["regions"] = fmt::format("anatomical rule, notch at x = {} mm", *o.notch_x);
     }
@@ -245,9 +266,15 @@ void add_subcommand_register_surface(CLI::App& app)
     sub->add_option("--visible", o->visible, "Dataset: visible percentage of the surface (one the dataset has: 50, 40, 30, 20, 10; default 30)");
     sub->add_option("--labels", o->labels, "Liver label volume (NIfTI/NRRD/MHA/DICOM): meshed with CGAL");
     sub->add_option("--liver-labels", o->liver_labels, "--labels: which labels form the liver (default every nonzero label)");
-    sub->add_option("--notch-x", o->notch_x, "--labels: x (LPS, mm) of the umbilical notch for the anatomical region rule (else no UN region)");
+    sub->add_option("--notch-x", o->notch_x, "--labels/--surface: x (LPS, mm) of the umbilical notch for the anatomical region rule (else: --labels "
+                                             "has no UN region, --surface no region at all)");
+    sub->add_option("--surface", o->surface, "Closed liver surface (STL/PLY/OBJ, mm, LPS): meshed with CGAL");
+    sub->add_option("--surface-scale", o->surface_scale, "--surface: factor to mm (e.g. 1000 for SOFA meshes in metres; default 1)");
     sub->add_option("--model", o->model, "Tetrahedral liver mesh (.vtu, .vtk, .msh) instead of --labels");
     sub->add_option("--regions", o->regions, "Labelled surface (PLY with vertex 'label'/'feature' or face labels; 0 surface, 1 UN, 2 AM) giving the model's regions");
+    sub->add_option("--region-seeds", o->region_seeds, "Points picked on the surface (CSV/FCSV/.mrk.json) named UN… or AM…: regions grown "
+                                                     "along the surface from them");
+    sub->add_option("--region-radius", o->region_radius, "--region-seeds: geodesic radius of each region, mm (default 15)");
     sub->add_option("--cloud", o->cloud, "Intra-operative point cloud (.ply with optional normals and 'label', or .csv x,y,z,label), mm, LPS");
     sub->add_option("--landmarks", o->landmarks, "Targets at rest (CSV/FCSV/.mrk.json) to map through the registration");
     sub->add_option("--landmarks-truth", o->landmarks_truth, "Their true deformed positions (same names): TRE in the summary");

@@ -8,6 +8,11 @@
 #include <CGAL/Mesh_complex_3_in_triangulation_3.h>
 #include <CGAL/Mesh_criteria_3.h>
 #include <CGAL/Mesh_triangulation_3.h>
+#include <CGAL/Polygon_mesh_processing/orientation.h>
+#include <CGAL/Polygon_mesh_processing/self_intersections.h>
+#include <CGAL/Polyhedral_mesh_domain_3.h>
+#include <CGAL/Surface_mesh.h>
+#include <CGAL/boost/graph/helpers.h>
 #include <CGAL/make_mesh_3.h>
 
 #include <algorithm>
@@ -94,6 +99,35 @@ double dihedral_deg(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d)
     return std::acos(cosine) * 180.0 / M_PI;
 }
 
+// The cells of a CGAL complex as a VolumeMesh (positive volumes, subdomain index as the label).
+template <class ComplexType>
+VolumeMesh export_complex(const ComplexType& complex, const std::string& what)
+{
+    using VertexHandle = typename ComplexType::Triangulation::Vertex_handle;
+    VolumeMesh mesh;
+    mesh.cell_type = CellType::tetrahedron;
+    std::unordered_map<const void*, std::int32_t> id_of;
+    const auto node = [&](VertexHandle v) {
+        const void* key = &*v;
+        const auto it = id_of.find(key);
+        if (it != id_of.end()) return it->second;
+        const auto& p = v->point().point();
+        const auto id = static_cast<std::int32_t>(mesh.nodes.size());
+        mesh.nodes.emplace_back(p.x(), p.y(), p.z());
+        id_of.emplace(key, id);
+        return id;
+    };
+    for (auto c = complex.cells_in_complex_begin(); c != complex.cells_in_complex_end(); ++c) {
+        std::array<std::int32_t, 4> ids{node(c->vertex(0)), node(c->vertex(1)), node(c->vertex(2)), node(c->vertex(3))};
+        const Vec3 &a = mesh.nodes[ids[0]], &b = mesh.nodes[ids[1]], &cc = mesh.nodes[ids[2]], &d = mesh.nodes[ids[3]];
+        if ((b - a).cross(cc - a).dot(d - a) < 0) std::swap(ids[2], ids[3]); // positive volume
+        mesh.cells.insert(mesh.cells.end(), ids.begin(), ids.end());
+        mesh.cell_labels.push_back(static_cast<std::int32_t>(complex.subdomain_index(c)));
+    }
+    if (mesh.cell_count() == 0) fail("{}: CGAL made no tetrahedra (are the features smaller than the sizes?)", what);
+    mesh.validate(what);
+    return mesh;
+}
 } // namespace
 
 void TetMeshingOptions::validate() const
@@ -152,29 +186,7 @@ VolumeMesh mesh_labels_tetrahedral(const LabelVolume& labels, const TetMeshingOp
         fail("{}: CGAL Mesh_3 failed: {}", what, e.what());
     }
 
-    VolumeMesh mesh;
-    mesh.cell_type = CellType::tetrahedron;
-    std::unordered_map<const void*, std::int32_t> id_of;
-    const auto node = [&](Triangulation::Vertex_handle v) {
-        const void* key = &*v;
-        const auto it = id_of.find(key);
-        if (it != id_of.end()) return it->second;
-        const auto& p = v->point().point();
-        const auto id = static_cast<std::int32_t>(mesh.nodes.size());
-        mesh.nodes.emplace_back(p.x(), p.y(), p.z());
-        id_of.emplace(key, id);
-        return id;
-    };
-    for (auto c = complex.cells_in_complex_begin(); c != complex.cells_in_complex_end(); ++c) {
-        std::array<std::int32_t, 4> ids{node(c->vertex(0)), node(c->vertex(1)), node(c->vertex(2)), node(c->vertex(3))};
-        const Vec3 &a = mesh.nodes[ids[0]], &b = mesh.nodes[ids[1]], &cc = mesh.nodes[ids[2]], &d = mesh.nodes[ids[3]];
-        if ((b - a).cross(cc - a).dot(d - a) < 0) std::swap(ids[2], ids[3]); // positive volume
-        mesh.cells.insert(mesh.cells.end(), ids.begin(), ids.end());
-        mesh.cell_labels.push_back(complex.subdomain_index(c));
-    }
-    if (mesh.cell_count() == 0) fail("{}: CGAL made no tetrahedra (are the features smaller than the sizes?)", what);
-    mesh.validate(what);
-    return mesh;
+    return export_complex(complex, what);
 }
 
 TetrahedronQuality measure_tetrahedra(const VolumeMesh& mesh)
@@ -220,6 +232,48 @@ TetrahedronQuality measure_tetrahedra(const VolumeMesh& mesh)
     q.mean_radius_ratio = ratio_sum / static_cast<double>(std::max<std::size_t>(1, q.cells));
     q.mean_edge_mm = edge_sum / static_cast<double>(std::max<std::size_t>(1, edges));
     return q;
+}
+
+VolumeMesh mesh_surface_tetrahedral(const SurfaceMesh& surface, const TetMeshingOptions& options, const std::string& what)
+{
+    using SurfacePolyhedron = CGAL::Surface_mesh<Point>;
+    using PolyDomain = CGAL::Polyhedral_mesh_domain_3<SurfacePolyhedron, Kernel>;
+    using PolyTriangulation = CGAL::Mesh_triangulation_3<PolyDomain, CGAL::Default, CGAL::Sequential_tag>::type;
+    using PolyComplex = CGAL::Mesh_complex_3_in_triangulation_3<PolyTriangulation>;
+    using PolyCriteria = CGAL::Mesh_criteria_3<PolyTriangulation>;
+    namespace pmp = CGAL::Polygon_mesh_processing;
+    options.validate();
+    surface.validate(what);
+    if (surface.triangles.empty()) fail("{}: the surface has no triangles", what);
+    SurfacePolyhedron sm;
+    std::vector<SurfacePolyhedron::Vertex_index> vertex;
+    for (const auto& v : surface.vertices) vertex.push_back(sm.add_vertex(Point(v.x(), v.y(), v.z())));
+    for (std::size_t t = 0; t < surface.triangles.size(); ++t) {
+        const auto& tri = surface.triangles[t];
+        if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) fail("{}: triangle {} repeats a vertex", what, t);
+        if (sm.add_face(vertex[tri[0]], vertex[tri[1]], vertex[tri[2]]) == SurfacePolyhedron::null_face())
+            fail("{}: triangle {} makes the surface non-manifold (an edge shared by more than two triangles, or inconsistent orientation)", what, t);
+    }
+    if (!CGAL::is_closed(sm)) fail("{}: the surface is not closed (it has border edges): a volume needs a watertight surface", what);
+    if (pmp::does_self_intersect(sm)) fail("{}: the surface intersects itself", what);
+    if (!pmp::is_outward_oriented(sm)) pmp::reverse_face_orientations(sm);
+    CGAL::Random random(options.seed);
+    CGAL::get_default_random() = CGAL::Random(options.seed);
+    PolyDomain domain(sm, &random);
+    namespace params = CGAL::parameters;
+    PolyCriteria criteria(params::facet_angle = options.facet_angle_deg, params::facet_size = options.facet_size_mm,
+                          params::facet_distance = options.facet_distance_mm, params::cell_radius_edge_ratio = options.radius_edge_ratio,
+                          params::cell_size = options.default_cell_size_mm);
+    PolyComplex complex;
+    try {
+        complex = CGAL::make_mesh_3<PolyComplex>(domain, criteria, params::no_perturb(), params::no_exude());
+        if (options.exude) CGAL::exude_mesh_3(complex, params::sliver_bound = 12.0);
+    } catch (const std::exception& e) {
+        fail("{}: CGAL Mesh_3 failed: {}", what, e.what());
+    }
+    VolumeMesh mesh = export_complex(complex, what);
+    std::fill(mesh.cell_labels.begin(), mesh.cell_labels.end(), 1);
+    return mesh;
 }
 
 } // namespace physreg

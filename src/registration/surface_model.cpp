@@ -4,6 +4,8 @@
 #include "physreg/phantom/partial_surface.hpp"
 
 #include <algorithm>
+#include <limits>
+#include <map>
 
 namespace physreg {
 
@@ -49,6 +51,87 @@ SurfaceModel surface_model_from_labels(const LabelVolume& labels, const std::set
     model.quality = measure_tetrahedra(model.mesh);
     model.surface = labelled_boundary(model.mesh, notch_x_mm);
     return model;
+}
+
+SurfaceModel surface_model_from_surface(const SurfaceMesh& surface, double cell_size_mm, std::optional<double> notch_x_mm, unsigned seed,
+                                        const std::string& what)
+{
+    TetMeshingOptions options;
+    options.default_cell_size_mm = cell_size_mm;
+    // The surface's own resolution bounds how closely the facets need to follow it.
+    double edge = 0.0;
+    for (const auto& t : surface.triangles) edge += (surface.vertices[t[1]] - surface.vertices[t[0]]).norm();
+    edge /= std::max<std::size_t>(1, surface.triangles.size());
+    options.facet_size_mm = std::max(0.6 * cell_size_mm, 0.5 * edge);
+    options.facet_distance_mm = std::max(0.5, 0.1 * edge);
+    options.seed = seed;
+    SurfaceModel model;
+    model.mesh = mesh_surface_tetrahedral(surface, options, what);
+    model.quality = measure_tetrahedra(model.mesh);
+    model.surface = labelled_boundary(model.mesh, notch_x_mm);
+    if (!notch_x_mm) std::fill(model.surface.labels.begin(), model.surface.labels.end(), feature_none);
+    return model;
+}
+
+LabelledTriangles regions_from_seeds(const VolumeMesh& mesh, const LabelledTriangles& boundary, const std::vector<RegionSeed>& seeds, double radius_mm,
+                                     double max_snap_mm, const std::string& what)
+{
+    if (!(radius_mm > 0)) fail("{}: region radius {} mm must be > 0", what, radius_mm);
+    // Surface graph: boundary vertices, edges weighted by length.
+    std::map<std::int32_t, std::vector<std::pair<std::int32_t, double>>> edges;
+    for (const auto& t : boundary.triangles)
+        for (int c = 0; c < 3; ++c) {
+            const auto a = t[c], b = t[(c + 1) % 3];
+            const double l = (mesh.nodes[a] - mesh.nodes[b]).norm();
+            edges[a].push_back({b, l});
+            edges[b].push_back({a, l});
+        }
+    LabelledTriangles out = boundary;
+    std::fill(out.labels.begin(), out.labels.end(), feature_none);
+    // Margin first, then the notch over it.
+    for (const std::int32_t label : {std::int32_t(feature_anterior_margin), std::int32_t(feature_umbilical_notch)}) {
+        std::map<std::int32_t, double> distance;
+        std::vector<std::pair<double, std::int32_t>> heap;
+        for (const auto& s : seeds) {
+            if (s.label != feature_anterior_margin && s.label != feature_umbilical_notch) fail("{}: seed label {} is neither 1 (UN) nor 2 (AM)", what, s.label);
+            if (s.label != label) continue;
+            std::int32_t nearest = -1;
+            double best = std::numeric_limits<double>::infinity();
+            for (const auto& [v, list] : edges) {
+                const double d = (mesh.nodes[v] - s.point).norm();
+                if (d < best) best = d, nearest = v;
+            }
+            if (!(best <= max_snap_mm)) fail("{}: a seed lies {:.1f} mm from the model's surface (at most {:.1f} mm)", what, best, max_snap_mm);
+            distance[nearest] = 0.0;
+            heap.push_back({0.0, nearest});
+        }
+        std::make_heap(heap.begin(), heap.end(), std::greater<>());
+        while (!heap.empty()) {
+            std::pop_heap(heap.begin(), heap.end(), std::greater<>());
+            const auto [d, v] = heap.back();
+            heap.pop_back();
+            if (d > distance[v] || d > radius_mm) continue;
+            for (const auto& [w, l] : edges[v]) {
+                const auto it = distance.find(w);
+                if (it == distance.end() || d + l < it->second) {
+                    distance[w] = d + l;
+                    heap.push_back({d + l, w});
+                    std::push_heap(heap.begin(), heap.end(), std::greater<>());
+                }
+            }
+        }
+        for (std::size_t t = 0; t < boundary.triangles.size(); ++t) {
+            double mean = 0.0;
+            bool reached = true;
+            for (auto v : boundary.triangles[t]) {
+                const auto it = distance.find(v);
+                if (it == distance.end()) reached = false;
+                else mean += it->second / 3.0;
+            }
+            if (reached && mean <= radius_mm) out.labels[t] = label;
+        }
+    }
+    return out;
 }
 
 LabelledTriangles unlabelled_boundary(const VolumeMesh& mesh)

@@ -10,6 +10,7 @@
 // criteria with sliver exudation, is in Debian (libcgal-dev, GPL-3.0-or-later like physreg), and is
 // deterministic for a fixed random seed.
 #include "physreg/image/image_geometry.hpp"
+#include "physreg/mesh/surface_mesh.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
 
 #include <map>
@@ -34,6 +35,12 @@ struct TetMeshingOptions {
 /// Meshes the selected labels of `labels`; cells carry their label. Throws Error naming `what` for
 /// bad options, no selected voxel, or an empty result (features smaller than the sizes).
 VolumeMesh mesh_labels_tetrahedral(const LabelVolume& labels, const TetMeshingOptions& options, const std::string& what);
+
+/// Meshes the inside of a closed surface (CGAL's polyhedral domain; cells labelled 1) with the
+/// sizes of `options` (default_cell_size_mm for the cells; labels and per-label sizes unused).
+/// Throws Error naming `what` for a surface that is empty, non-manifold, not closed or
+/// self-intersecting. An inward-oriented surface is turned outward.
+VolumeMesh mesh_surface_tetrahedral(const SurfaceMesh& surface, const TetMeshingOptions& options, const std::string& what);
 
 /// Shape measures of a tetrahedral mesh, for the quality report.
 struct TetrahedronQuality {

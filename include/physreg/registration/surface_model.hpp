@@ -28,6 +28,24 @@ struct SurfaceModel {
 SurfaceModel surface_model_from_labels(const LabelVolume& labels, const std::set<std::int32_t>& liver_labels, double cell_size_mm,
                                        std::optional<double> notch_x_mm, unsigned seed, const std::string& what);
 
+/// Meshes the inside of a closed liver surface (STL/PLY/OBJ) the same way; regions by the anatomical
+/// rule when `notch_x_mm` is given, else every triangle "surface". Throws Error for open,
+/// non-manifold or self-intersecting surfaces.
+SurfaceModel surface_model_from_surface(const SurfaceMesh& surface, double cell_size_mm, std::optional<double> notch_x_mm, unsigned seed,
+                                        const std::string& what);
+
+/// A point the user picked on the surface and the region it seeds (1 UN, 2 AM).
+struct RegionSeed {
+    std::int32_t label = 0;
+    Vec3 point = Vec3::Zero();
+};
+/// Regions grown from picked points: a triangle takes a seed's label when its centroid lies within
+/// `radius_mm` of the seed along the surface (Dijkstra over the surface edges from the vertex
+/// nearest the seed); the notch wins over the margin where both reach. Throws Error naming `what`
+/// for a seed farther than `max_snap_mm` from the surface or a radius ≤ 0.
+LabelledTriangles regions_from_seeds(const VolumeMesh& mesh, const LabelledTriangles& boundary, const std::vector<RegionSeed>& seeds, double radius_mm,
+                                     double max_snap_mm, const std::string& what);
+
 /// The boundary of a tetrahedral mesh, every triangle "surface" (0).
 LabelledTriangles unlabelled_boundary(const VolumeMesh& mesh);
 
