@@ -207,8 +207,20 @@ expect_error "register-surface: NaN in the cloud" "expected 4 finite values" "$p
 awk -F, '/^#/ || /^x,/ {print; next} {printf "%f,%f,%f,0\n", $1+500, $2, $3}' "$cloud" > "$work/far_cloud.csv"
 expect_error "register-surface: cloud far from the model" "farther than 40 mm" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$work/far_cloud.csv" -o "$work/rs_bad5"
 expect_error "register-surface: unknown method" "--method 'elastic'" "$physreg" $rs --dataset "$work/ph" --visible 50 --method elastic -o "$work/rs_bad6"
-expect_error "register-surface: two model sources" "exactly one of --dataset, --labels and --model" "$physreg" $rs --dataset "$work/ph" --model "$work/rs/mesh.vtu" -o "$work/rs_bad7"
+expect_error "register-surface: two model sources" "exactly one of --dataset, --labels, --surface and --model" "$physreg" $rs --dataset "$work/ph" --model "$work/rs/mesh.vtu" -o "$work/rs_bad7"
 for d in rs_bad3 rs_bad4 rs_bad5 rs_bad6 rs_bad7; do expect_no_file "$work/$d"; done
+# A closed surface in, regions grown from two picked points, the heterogeneous model (capsule and
+# the phantom's vessel centrelines).
+awk -F, '/^#/ || /^name/ {print; next} /surface/ && n < 2 {n++; sub(/^[^,]*/, n == 1 ? "UN_1" : "AM_1"); print}' "$work/ph/rest/landmarks.csv" > "$work/seeds.csv"
+expect_ok "register-surface from a closed surface" "$physreg" $rs --surface "$work/rs/regions.ply" --region-seeds "$work/seeds.csv" \
+  --cloud "$work/ph/states/insufflation/partial_surface_050.ply" --model-kind heterogeneous --vessels "$work/ph/rest/vessel_centrelines.csv" -o "$work/rs3"
+grep -q '"vessels"' "$work/rs3/summary.json" && grep -q '"capsule"' "$work/rs3/summary.json" && pass || failed "heterogeneous model lists capsule and vessels"
+grep -q '"umbilical_notch"' "$work/rs3/summary.json" && pass || failed "--region-seeds made a notch region"
+printf 'v 0 0 0\nv 10 0 0\nv 0 10 0\nf 1 2 3\n' > "$work/open.obj"
+expect_error "register-surface: open surface" "not closed" "$physreg" $rs --surface "$work/open.obj" --cloud "$cloud" -o "$work/rs_bad8"
+expect_no_file "$work/rs_bad8"
+expect_error "register-surface: vessels without the heterogeneous model" "only the heterogeneous model" "$physreg" $rs --dataset "$work/ph" --visible 50 \
+  --vessels "$work/ph/rest/vessel_centrelines.csv" -o "$work/rs_bad9"
 
 # physreg estimate / register-compression / evaluate on the small phantom (≈ 5 mm cells).
 g="--grid 36x27x12"

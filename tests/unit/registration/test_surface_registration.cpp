@@ -12,6 +12,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <map>
 #include <random>
 
 namespace physreg {
@@ -347,6 +348,99 @@ TEST(SurfaceModel, RegionsRoundTripThroughALabelledSurface)
     SurfaceMesh far = regions;
     for (auto& v : far.vertices) v += Vec3(0, 0, 50);
     EXPECT_NE(test::error_message([&] { regions_from_surface(model.mesh, model.surface, far, 5.0, "regions"); }).find("from the regions surface"),
+              std::string::npos);
+}
+
+} // namespace physreg
+
+namespace physreg {
+
+namespace {
+// A closed sphere surface of radius 15 mm about (20, 20, 20): an octahedron subdivided 3 times,
+// outward, 512 triangles.
+SurfaceMesh sphere_surface()
+{
+    std::vector<Vec3> v = {Vec3(1, 0, 0), Vec3(-1, 0, 0), Vec3(0, 1, 0), Vec3(0, -1, 0), Vec3(0, 0, 1), Vec3(0, 0, -1)};
+    std::vector<std::array<std::int32_t, 3>> t = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4}, {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+    for (int level = 0; level < 3; ++level) {
+        std::map<std::pair<int, int>, std::int32_t> middle;
+        const auto mid = [&](std::int32_t a, std::int32_t b) {
+            const auto key = std::minmax(a, b);
+            const auto it = middle.find(key);
+            if (it != middle.end()) return it->second;
+            v.push_back((v[a] + v[b]).normalized());
+            return middle[key] = static_cast<std::int32_t>(v.size() - 1);
+        };
+        std::vector<std::array<std::int32_t, 3>> next;
+        for (const auto& f : t) {
+            const auto ab = mid(f[0], f[1]), bc = mid(f[1], f[2]), ca = mid(f[2], f[0]);
+            next.insert(next.end(), {{f[0], ab, ca}, {ab, f[1], bc}, {ca, bc, f[2]}, {ab, bc, ca}});
+        }
+        t.swap(next);
+    }
+    SurfaceMesh s;
+    for (const auto& p : v) s.vertices.push_back(Vec3(20, 20, 20) + 15.0 * p);
+    s.triangles = t;
+    return s;
+}
+
+double enclosed_volume(const SurfaceMesh& s)
+{
+    double v = 0.0;
+    for (const auto& t : s.triangles) v += s.vertices[t[0]].dot(s.vertices[t[1]].cross(s.vertices[t[2]])) / 6.0;
+    return std::abs(v);
+}
+} // namespace
+
+TEST(SurfaceModel, ClosedSurfacesAreMeshedAndOpenOrSelfIntersectingOnesRefused)
+{
+    SurfaceMesh box = sphere_surface();
+    // Facets of ≤ 1.8 mm (0.6 × the 3 mm cells) inscribed in the 15 mm sphere lose ≈ 3 sag/r ≈ 2 % of the volume.
+    const SurfaceModel model = surface_model_from_surface(box, 3.0, std::nullopt, 1, "sphere");
+    double volume = 0.0;
+    for (std::size_t c = 0; c < model.mesh.cell_count(); ++c) volume += cell_volume(model.mesh, c);
+    EXPECT_LT(volume, enclosed_volume(box));
+    EXPECT_GT(volume, 0.97 * enclosed_volume(box));
+    for (auto l : model.surface.labels) EXPECT_EQ(l, feature_none);
+    // Inward orientation is turned outward: the same volume.
+    SurfaceMesh inward = box;
+    for (auto& t : inward.triangles) std::swap(t[1], t[2]);
+    double inward_volume = 0.0;
+    const SurfaceModel flipped = surface_model_from_surface(inward, 3.0, std::nullopt, 1, "sphere");
+    for (std::size_t c = 0; c < flipped.mesh.cell_count(); ++c) inward_volume += cell_volume(flipped.mesh, c);
+    EXPECT_NEAR(inward_volume, volume, 0.01 * volume);
+    SurfaceMesh open = box;
+    open.triangles.pop_back();
+    EXPECT_NE(test::error_message([&] { surface_model_from_surface(open, 6.0, std::nullopt, 1, "open sphere"); }).find("not closed"), std::string::npos);
+    SurfaceMesh crossing = box;
+    const SurfaceMesh other = sphere_surface();
+    const auto offset = static_cast<std::int32_t>(crossing.vertices.size());
+    for (const auto& v : other.vertices) crossing.vertices.push_back(v + Vec3(10, 5, 3));
+    for (const auto& t : other.triangles) crossing.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+    EXPECT_NE(test::error_message([&] { surface_model_from_surface(crossing, 6.0, std::nullopt, 1, "two spheres"); }).find("intersects itself"),
+              std::string::npos);
+}
+
+TEST(SurfaceModel, RegionsGrowAlongTheSurfaceFromPickedPoints)
+{
+    const SurfaceModel& model = ellipsoid_model();
+    // A margin seed on the anterior side (−y) and a notch seed beside it; radius 12 mm.
+    const Vec3 centre(36, 24, 19.5);
+    const std::vector<RegionSeed> seeds{{feature_anterior_margin, centre + Vec3(0, -20, 0)}, {feature_umbilical_notch, centre + Vec3(10, -18, 0)}};
+    const LabelledTriangles regions = regions_from_seeds(model.mesh, model.surface, seeds, 12.0, 3.0, "seeds");
+    std::size_t notch = 0, margin = 0;
+    for (std::size_t t = 0; t < regions.triangles.size(); ++t) {
+        const auto& tri = regions.triangles[t];
+        const Vec3 c = (model.mesh.nodes[tri[0]] + model.mesh.nodes[tri[1]] + model.mesh.nodes[tri[2]]) / 3.0;
+        if (regions.labels[t] == feature_none) continue;
+        (regions.labels[t] == feature_umbilical_notch ? notch : margin) += 1;
+        const Vec3 seed = regions.labels[t] == feature_umbilical_notch ? seeds[1].point : seeds[0].point;
+        EXPECT_LT((c - seed).norm(), 12.5); // the straight distance never exceeds the surface distance (centroid vs corners: + 0.5 mm)
+    }
+    EXPECT_GT(notch, 5u);
+    EXPECT_GT(margin, 5u);
+    EXPECT_NE(test::error_message([&] { regions_from_seeds(model.mesh, model.surface, {{feature_anterior_margin, centre}}, 12.0, 3.0, "seeds"); })
+                  .find("from the model's surface"),
               std::string::npos);
 }
 
