@@ -426,6 +426,8 @@ void add_subcommand_register_surface(CLI::App& app)
         summary["units"] = {{"length", "mm"}, {"force", "N"}, {"time", "s"}, {"young_modulus", "Pa"}};
         summary["inputs"] = in.description;
         summary["method"] = o->method;
+        summary["support"] = o->support;
+        summary["support_nodes"] = options.fixed_nodes.size();
         summary["model"] = {{"kind", o->model_kind}, {"element", "linear tetrahedra (CGAL Mesh_3), co-rotational"}, {"nodes", in.mesh.node_count()},
                             {"tetrahedra", in.mesh.cell_count()}, {"surface_triangles", in.surface.triangles.size()},
                             {"young_modulus_pa", E}, {"poisson_ratio", o->poisson}};
@@ -444,7 +446,7 @@ void add_subcommand_register_surface(CLI::App& app)
         for (auto l : in.surface.labels) ++region_triangles[l == 1 ? "umbilical_notch" : l == 2 ? "anterior_margin" : "surface"];
         summary["model"]["region_triangles"] = region_triangles;
         summary["cloud"] = {{"points", in.cloud.points.size()}, {"mean_spacing_mm", spacing}, {"normals", !in.cloud.normals.empty()}};
-        summary["parameters"] = {{"d90_mm", o->d90}, {"traction_ratio", o->traction}, {"k_max_n", k_max}, {"distance_fraction", o->distance_fraction},
+        summary["parameters"] = {{"cell_size_mm", o->cell_size}, {"d90_mm", o->d90}, {"traction_ratio", o->traction}, {"k_max_n", k_max}, {"distance_fraction", o->distance_fraction},
                                  {"normal_agreement", o->normal_agreement}, {"time_step_s", o->time_step}, {"rayleigh_mass_per_s", 0.1},
                                  {"rayleigh_stiffness_s", 0.1}, {"plateau_tolerance_mm", o->plateau_tolerance}, {"exponent", 3},
                                  {"r", {{"umbilical_notch", 2}, {"anterior_margin", 4}, {"surface", 10}}}};
