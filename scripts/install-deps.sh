@@ -18,6 +18,7 @@ packages=(
   libnlopt-cxx-dev         # BOBYQA / Nelder–Mead: parameter estimation
   libopenmpi-dev openmpi-bin # enrichment database builds across processes (mpirun)
   zlib1g-dev               # compressed VTU arrays
+  python3-matplotlib       # plots of the studies (scripts/study_surface.py)
   libgtest-dev libgmock-dev libbenchmark-dev
   calculix-ccx             # tests: an independent nonlinear FE solver to compare Newton with (optional at run time)
 )

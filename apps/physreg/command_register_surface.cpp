@@ -416,6 +416,7 @@ void add_subcommand_register_surface(CLI::App& app)
         data.point_data.push_back({"displacement", 3, chosen.u});
         write_vtu(staging.path() / "mesh.vtu", in.mesh, data);
         write_surface(staging.path() / "regions.ply", regions_surface(in.mesh, in.surface));
+        write_surface(staging.path() / "regions.vtk", regions_surface(in.mesh, in.surface));
         write_surface(staging.path() / "registered_surface.ply", regions_surface(in.mesh, in.surface, &chosen.u));
         const ImageGeometry geometry = in.field_geometry ? *in.field_geometry : image_grid_over_mesh(in.mesh, o->field_spacing, 2 * o->field_spacing);
         write_displacement_field(staging.path() / "displacement.nii.gz", sample_displacement_field(in.mesh, chosen.u, geometry).field);

@@ -3,6 +3,7 @@
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
 
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <map>
@@ -301,14 +302,147 @@ void write_obj(std::ofstream& out, const SurfaceMesh& mesh)
     }
 }
 
+// Legacy VTK POLYDATA, ASCII: POINTS, POLYGONS (fans of polygons become triangles), VERTICES and
+// LINES skipped, CELL_DATA / POINT_DATA scalars (labels) and point NORMALS.
+SurfaceMesh read_vtk_polydata(const fs::path& path, const std::string& what)
+{
+    std::ifstream in(path);
+    if (!in) fail("{}: cannot open file", what);
+    std::string line;
+    std::getline(in, line);
+    if (line.rfind("# vtk DataFile", 0) != 0) fail("{}: not a legacy VTK file (first line '{}')", what, line.substr(0, 40));
+    std::getline(in, line); // title
+    std::string format;
+    in >> format;
+    if (format == "BINARY") fail("{}: binary legacy VTK is not supported; save it as ASCII (or use PLY/STL/OBJ)", what);
+    if (format != "ASCII") fail("{}: expected ASCII or BINARY, found '{}'", what, format);
+    std::string keyword, kind;
+    in >> keyword >> kind;
+    if (keyword != "DATASET" || kind != "POLYDATA") fail("{}: only DATASET POLYDATA is read as a surface (found '{} {}')", what, keyword, kind);
+    SurfaceMesh mesh;
+    std::vector<std::int32_t> face_label;
+    std::string attribute_of; // "CELL_DATA" or "POINT_DATA": where the next attributes belong
+    std::size_t polygons = 0;
+    const auto number = [&]() {
+        std::string token;
+        if (!(in >> token)) fail("{}: truncated file", what);
+        try {
+            std::size_t used = 0;
+            const double v = std::stod(token, &used);
+            if (used != token.size()) throw std::invalid_argument(token);
+            return v;
+        } catch (const std::logic_error&) {
+            fail("{}: '{}' is not a number", what, token);
+        }
+    };
+    const auto count = [&]() {
+        const double v = number();
+        if (!(v >= 0 && v == std::floor(v) && v < 1e9)) fail("{}: bad count {}", what, v);
+        return static_cast<std::size_t>(v);
+    };
+    while (in >> keyword) {
+        if (keyword == "POINTS") {
+            const std::size_t n = count();
+            in >> kind;
+            mesh.vertices.resize(n);
+            for (auto& v : mesh.vertices)
+                for (int d = 0; d < 3; ++d) v[d] = number(); // one at a time: argument order is unspecified
+        } else if (keyword == "POLYGONS" || keyword == "VERTICES" || keyword == "LINES") {
+            const std::size_t n = count();
+            count(); // total size
+            for (std::size_t c = 0; c < n; ++c) {
+                const std::size_t k = count();
+                std::vector<std::int32_t> ids(k);
+                for (auto& id : ids) id = static_cast<std::int32_t>(number());
+                if (keyword != "POLYGONS") continue;
+                if (k < 3) fail("{}: polygon {} has {} points", what, c, k);
+                for (std::size_t j = 1; j + 1 < k; ++j) {
+                    mesh.triangles.push_back({ids[0], ids[j], ids[j + 1]});
+                    face_label.push_back(static_cast<std::int32_t>(polygons));
+                }
+                ++polygons;
+            }
+        } else if (keyword == "TRIANGLE_STRIPS") {
+            fail("{}: TRIANGLE_STRIPS are not supported", what);
+        } else if (keyword == "CELL_DATA" || keyword == "POINT_DATA") {
+            attribute_of = keyword;
+            count();
+        } else if (keyword == "SCALARS") {
+            std::string name, type;
+            in >> name >> type;
+            std::getline(in, line); // optional component count
+            const int components = line.find_first_not_of(" \t") == std::string::npos ? 1 : std::stoi(line);
+            in >> keyword;
+            if (keyword == "LOOKUP_TABLE") in >> keyword; else fail("{}: SCALARS {} without LOOKUP_TABLE", what, name);
+            const bool cells = attribute_of == "CELL_DATA";
+            const std::size_t n = (cells ? polygons : mesh.vertices.size()) * static_cast<std::size_t>(components);
+            std::vector<double> values(n);
+            for (auto& v : values) v = number();
+            const bool label = name == "label" || name == "feature" || name == "region" || name == "inside_label";
+            if (name == "outside_label" && cells && components == 1) {
+                if (mesh.labels.size() != face_label.size()) mesh.labels.assign(face_label.size(), {0, 0});
+                for (std::size_t t = 0; t < face_label.size(); ++t) mesh.labels[t][1] = static_cast<std::int32_t>(values[static_cast<std::size_t>(face_label[t])]);
+            } else if (label && components == 1) {
+                if (cells) {
+                    if (mesh.labels.size() != face_label.size()) mesh.labels.assign(face_label.size(), {0, 0});
+                    for (std::size_t t = 0; t < face_label.size(); ++t) mesh.labels[t][0] = static_cast<std::int32_t>(values[static_cast<std::size_t>(face_label[t])]);
+                } else {
+                    mesh.vertex_labels.assign(values.begin(), values.end());
+                }
+            }
+        } else if (keyword == "NORMALS" || keyword == "VECTORS") {
+            std::string name, type;
+            in >> name >> type;
+            const bool cells = attribute_of == "CELL_DATA";
+            std::vector<Vec3> values(cells ? polygons : mesh.vertices.size());
+            for (auto& v : values)
+                for (int d = 0; d < 3; ++d) v[d] = number();
+            if (keyword == "NORMALS" && !cells) mesh.vertex_normals = values;
+        } else if (keyword == "METADATA") {
+            while (std::getline(in, line) && !line.empty()) {
+            }
+        } else {
+            fail("{}: unsupported legacy VTK section '{}'", what, keyword);
+        }
+    }
+    return mesh;
+}
+
+void write_vtk_polydata(std::ofstream& out, const SurfaceMesh& mesh)
+{
+    out << "# vtk DataFile Version 3.0\nphysreg surface (mm, LPS)\nASCII\nDATASET POLYDATA\nPOINTS " << mesh.vertices.size() << " double\n";
+    out.precision(10);
+    for (const auto& v : mesh.vertices) out << v.x() << ' ' << v.y() << ' ' << v.z() << '\n';
+    out << "POLYGONS " << mesh.triangles.size() << ' ' << 4 * mesh.triangles.size() << '\n';
+    for (const auto& t : mesh.triangles) out << "3 " << t[0] << ' ' << t[1] << ' ' << t[2] << '\n';
+    if (!mesh.labels.empty()) {
+        out << "CELL_DATA " << mesh.triangles.size() << "\nSCALARS inside_label int 1\nLOOKUP_TABLE default\n";
+        for (const auto& l : mesh.labels) out << l[0] << '\n';
+        out << "SCALARS outside_label int 1\nLOOKUP_TABLE default\n";
+        for (const auto& l : mesh.labels) out << l[1] << '\n';
+    }
+    if (!mesh.vertex_labels.empty() || !mesh.vertex_normals.empty()) {
+        out << "POINT_DATA " << mesh.vertices.size() << '\n';
+        if (!mesh.vertex_labels.empty()) {
+            out << "SCALARS label int 1\nLOOKUP_TABLE default\n";
+            for (auto l : mesh.vertex_labels) out << l << '\n';
+        }
+        if (!mesh.vertex_normals.empty()) {
+            out << "NORMALS normals double\n";
+            for (const auto& n : mesh.vertex_normals) out << n.x() << ' ' << n.y() << ' ' << n.z() << '\n';
+        }
+    }
+}
+
 } // namespace
 
 SurfaceMesh read_point_set(const fs::path& path)
 {
     const std::string what = "point set '" + path.string() + "'";
     if (!fs::exists(path)) fail("{}: file does not exist", what);
-    if (full_extension(path) != ".ply") fail("{}: point sets are read from PLY files", what);
-    SurfaceMesh mesh = read_ply(path, what);
+    const std::string ext = full_extension(path);
+    if (ext != ".ply" && ext != ".vtk") fail("{}: point sets are read from PLY or legacy VTK files", what);
+    SurfaceMesh mesh = ext == ".ply" ? read_ply(path, what) : read_vtk_polydata(path, what);
     mesh.validate(what);
     if (mesh.vertices.empty()) fail("{}: holds no vertices", what);
     return mesh;
@@ -323,7 +457,8 @@ SurfaceMesh read_surface(const fs::path& path)
     if (ext == ".stl") mesh = read_stl(path, what);
     else if (ext == ".ply") mesh = read_ply(path, what);
     else if (ext == ".obj") mesh = read_obj(path, what);
-    else fail("{}: unknown surface extension '{}' (use .stl, .ply or .obj)", what, ext);
+    else if (ext == ".vtk") mesh = read_vtk_polydata(path, what);
+    else fail("{}: unknown surface extension '{}' (use .stl, .ply, .obj or .vtk)", what, ext);
     mesh.validate(what);
     if (mesh.triangles.empty()) fail("{}: holds no triangles", what);
     return mesh;
@@ -333,12 +468,13 @@ void write_surface(const fs::path& path, const SurfaceMesh& mesh)
 {
     mesh.validate("surface for '" + path.string() + "'");
     const std::string ext = full_extension(path);
-    if (ext != ".stl" && ext != ".ply" && ext != ".obj")
-        fail("surface '{}': unknown extension '{}' (use .stl, .ply or .obj)", path.string(), ext);
+    if (ext != ".stl" && ext != ".ply" && ext != ".obj" && ext != ".vtk")
+        fail("surface '{}': unknown extension '{}' (use .stl, .ply, .obj or .vtk)", path.string(), ext);
     write_atomically(path, [&](const fs::path& tmp) {
         std::ofstream out(tmp, std::ios::binary);
         if (ext == ".stl") write_stl(out, mesh);
         else if (ext == ".ply") write_ply(out, mesh);
+        else if (ext == ".vtk") write_vtk_polydata(out, mesh);
         else write_obj(out, mesh);
         out.close();
         if (!out) fail("surface '{}': write failed", path.string());

@@ -234,7 +234,7 @@ LabelledPointCloud read_point_cloud(const std::filesystem::path& path)
     LabelledPointCloud cloud;
     if (ext == ".csv") {
         cloud = read_point_cloud_csv(path);
-    } else if (ext == ".ply") {
+    } else if (ext == ".ply" || ext == ".vtk") {
         const SurfaceMesh points = read_point_set(path);
         cloud.points = points.vertices;
         cloud.normals = points.vertex_normals;
@@ -242,7 +242,7 @@ LabelledPointCloud read_point_cloud(const std::filesystem::path& path)
             if (!n.allFinite()) fail("point cloud '{}': a normal is not finite", path.string());
         cloud.labels = points.vertex_labels.empty() ? std::vector<std::int32_t>(points.vertices.size(), feature_none) : points.vertex_labels;
     } else {
-        fail("point cloud '{}': unknown extension '{}' (use .ply or .csv)", path.string(), ext);
+        fail("point cloud '{}': unknown extension '{}' (use .ply, .vtk or .csv)", path.string(), ext);
     }
     if (cloud.points.empty()) fail("point cloud '{}': no points", path.string());
     return cloud;

@@ -185,13 +185,13 @@ ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
 # physreg register-surface (paper 001) on the small phantom's insufflation, then from plain files.
 rs="--log-level warn register-surface --cell-size 10 --max-steps-per-plateau 20"
 expect_ok "register-surface dataset" "$physreg" $rs --dataset "$work/ph" --visible 50 -o "$work/rs" --json
-for f in mesh.vtu displacement.nii.gz landmarks.csv regions.ply registered_surface.ply summary.json; do expect_file "$work/rs/$f"; done
+for f in mesh.vtu displacement.nii.gz landmarks.csv regions.ply regions.vtk registered_surface.ply summary.json; do expect_file "$work/rs/$f"; done
 for key in '"biomechanical"' '"rigid"' '"icp"' '"at_rest"' '"hausdorff_mm"' '"node_tre_mm"' '"plateaus"' '"tre"'; do
   grep -q "$key" "$work/rs/summary.json" && pass || failed "register-surface summary lacks $key"
 done
 expect_ok "info reads the surface registration field" "$physreg" info "$work/rs/displacement.nii.gz"
 cloud="$work/ph/states/insufflation/partial_surface_050.csv"
-expect_ok "register-surface from a mesh, regions and a cloud" "$physreg" $rs --model "$work/rs/mesh.vtu" --regions "$work/rs/regions.ply" \
+expect_ok "register-surface from a mesh, regions and a cloud" "$physreg" $rs --model "$work/rs/mesh.vtu" --regions "$work/rs/regions.vtk" \
   --cloud "$cloud" --landmarks "$work/ph/rest/landmarks.csv" --landmarks-truth "$work/ph/states/insufflation/landmarks.csv" \
   --truth-surface "$work/ph/states/insufflation/liver_surface.ply" --method rigid --support posterior -o "$work/rs2"
 grep -q '"method": "rigid"' "$work/rs2/summary.json" && pass || failed "register-surface --method rigid recorded"

@@ -2,6 +2,7 @@
 #include "physreg/io/gmsh.hpp"
 #include "physreg/io/mesh_io.hpp"
 #include "physreg/io/surface_io.hpp"
+#include "physreg/phantom/partial_surface.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 #include "physreg/mesh/surface_extraction.hpp"
 #include "physreg/mesh/tet_split.hpp"
@@ -214,6 +215,39 @@ TEST(IoMeshFiles, SurfaceRoundTrips)
             EXPECT_LT((stl.vertices[stl.triangles[t][v]] - s.vertices[s.triangles[t][v]]).norm(), 1e-5);
     std::ofstream(dir / "cut.stl", std::ios::binary) << read_all(dir / "s.stl").substr(0, 200);
     EXPECT_FALSE(error_of([&] { read_surface(dir / "cut.stl"); }).empty());
+}
+
+TEST(IoMeshFiles, LegacyVtkPolydataKeepsLabelsNormalsAndServesAsAPointCloud)
+{
+    test::TempDir dir;
+    SurfaceMesh s = extract_surfaces(sample_hex_mesh());
+    for (std::size_t v = 0; v < s.vertices.size(); ++v) {
+        s.vertex_labels.push_back(static_cast<std::int32_t>(v % 3));
+        s.vertex_normals.push_back(Vec3(0, 0, 1));
+    }
+    write_surface(dir / "s.vtk", s);
+    const SurfaceMesh back = read_surface(dir / "s.vtk");
+    ASSERT_EQ(back.vertices.size(), s.vertices.size());
+    for (std::size_t v = 0; v < s.vertices.size(); ++v) EXPECT_LT((back.vertices[v] - s.vertices[v]).norm(), 1e-8);
+    EXPECT_EQ(back.triangles, s.triangles);
+    EXPECT_EQ(back.labels, s.labels);
+    EXPECT_EQ(back.vertex_labels, s.vertex_labels);
+    EXPECT_EQ(back.vertex_normals, s.vertex_normals);
+    const LabelledPointCloud cloud = read_point_cloud(dir / "s.vtk");
+    EXPECT_EQ(cloud.points.size(), s.vertices.size());
+    EXPECT_EQ(cloud.labels, s.vertex_labels);
+    // A quad fan and a vertices-only cloud written by hand (as ParaView's "Save Data", ASCII).
+    std::ofstream(dir / "quad.vtk") << "# vtk DataFile Version 3.0\nq\nASCII\nDATASET POLYDATA\nPOINTS 4 float\n0 0 0 1 0 0 1 1 0 0 1 0\n"
+                                       "POLYGONS 1 5\n4 0 1 2 3\nCELL_DATA 1\nSCALARS region int\nLOOKUP_TABLE default\n2\n";
+    const SurfaceMesh quad = read_surface(dir / "quad.vtk");
+    ASSERT_EQ(quad.triangles.size(), 2u);
+    EXPECT_EQ(quad.labels[1][0], 2);
+    std::ofstream(dir / "binary.vtk") << "# vtk DataFile Version 3.0\nb\nBINARY\nDATASET POLYDATA\n";
+    EXPECT_NE(error_of([&] { read_surface(dir / "binary.vtk"); }).find("binary legacy VTK"), std::string::npos);
+    std::ofstream(dir / "grid.vtk") << "# vtk DataFile Version 3.0\ng\nASCII\nDATASET UNSTRUCTURED_GRID\n";
+    EXPECT_NE(error_of([&] { read_surface(dir / "grid.vtk"); }).find("only DATASET POLYDATA"), std::string::npos);
+    std::ofstream(dir / "cut.vtk") << "# vtk DataFile Version 3.0\nc\nASCII\nDATASET POLYDATA\nPOINTS 4 float\n0 0 0 1\n";
+    EXPECT_NE(error_of([&] { read_surface(dir / "cut.vtk"); }).find("truncated"), std::string::npos);
 }
 
 } // namespace physreg
