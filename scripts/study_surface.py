@@ -25,11 +25,12 @@ parser.add_argument("work")
 parser.add_argument("--physreg", default=os.path.join(ROOT, "build", "bin", "physreg"))
 parser.add_argument("--quick", action="store_true", help="small preset, two cases, three fractions (a smoke run)")
 parser.add_argument("--no-docs", action="store_true")
+parser.add_argument("--no-real", action="store_true", help="leave out the real-liver case (../shared/data)")
 args = parser.parse_args()
 os.makedirs(os.path.join(args.work, "runs"), exist_ok=True)
 
 NOMINAL_E = {"healthy": 3500.0, "cirrhotic": 30000.0}
-PRESSURE_FRACTION = 0.05  # insufflation pressure as a fraction of the nominal parenchyma modulus
+PRESSURE_FRACTION = 0.10  # insufflation pressure as a fraction of the nominal parenchyma modulus (healthy 350 Pa, cirrhotic 3 kPa)
 SHARED = os.path.join(os.path.dirname(ROOT), "shared", "data")
 
 cases = []
@@ -44,12 +45,12 @@ else:
         for seed in (2, 3):
             cases.append({"name": f"cirs057a-{material}-{seed}", "material": material, "seed": seed, "phantom": []})
     msd = os.path.join(SHARED, "msd-hepaticvessel-liver-vessel-masks")
-    if os.path.isdir(msd):
+    if os.path.isdir(msd) and not args.no_real:
         cases.append({"name": "msd002-healthy-2", "material": "healthy", "seed": 2,
                       "phantom": ["--from-labels", os.path.join(msd, "hepaticvessel_002_liver.nii.gz"), "--label-roles", "liver=1",
                                   "--vessel-mask", os.path.join(msd, "hepaticvessel_002_vsnet.nii.gz")]})
     else:
-        print("note: ../shared/data absent, the real-liver case is skipped", file=sys.stderr)
+        print("note: the real-liver case is skipped (--no-real or ../shared/data absent)", file=sys.stderr)
 
 
 def run(command):
@@ -74,8 +75,9 @@ for case in cases:
     for visible in fractions:
         for kind, support in (("homogeneous", "none"), ("homogeneous", "posterior"), ("heterogeneous", "none"), ("heterogeneous", "posterior")):
             out = os.path.join(args.work, "runs", f"{case['name']}_{visible:02d}_{kind}_{support}")
-            run([args.physreg, "--log-level", "warn", "register-surface", "--dataset", dataset, "--visible", str(visible), "--support", support,
-                 "--model-kind", kind, "--material", case["material"], "-o", out, "--force"])
+            if not os.path.exists(os.path.join(out, "summary.json")):  # a rerun reuses finished registrations
+                run([args.physreg, "--log-level", "warn", "register-surface", "--dataset", dataset, "--visible", str(visible), "--support", support,
+                     "--model-kind", kind, "--material", case["material"], "-o", out, "--force"])
             summary = json.load(open(os.path.join(out, "summary.json")))
             for method, m in summary["methods"].items():
                 name = method if method != "biomechanical" else kind + ("" if support == "none" else "+support")
