@@ -202,20 +202,6 @@ LandmarkSet map_landmarks(const VolumeMesh& mesh, const std::vector<NodeEmbeddin
     return out;
 }
 
-/// Boundary nodes whose area-weighted normal points along `direction` (cosine > `cosine`).
-std::vector<std::int32_t> facing_nodes(const VolumeMesh& mesh, const LabelledTriangles& surface, const Vec3& direction, double cosine)
-{
-    std::vector<Vec3> normal(mesh.node_count(), Vec3::Zero());
-    for (const auto& t : surface.triangles) {
-        const Vec3 area = 0.5 * (mesh.nodes[t[1]] - mesh.nodes[t[0]]).cross(mesh.nodes[t[2]] - mesh.nodes[t[0]]);
-        for (auto n : t) normal[static_cast<std::size_t>(n)] += area;
-    }
-    std::vector<std::int32_t> out;
-    for (std::size_t n = 0; n < normal.size(); ++n)
-        if (normal[n].norm() > 0 && normal[n].normalized().dot(direction) > cosine) out.push_back(static_cast<std::int32_t>(n));
-    return out;
-}
-
 struct MethodOutcome {
     std::string name;
     std::vector<double> u;
@@ -350,7 +336,7 @@ void add_subcommand_register_surface(CLI::App& app)
         if (capsule) options.structures.push_back(&*capsule);
         if (beams) options.structures.push_back(&*beams);
         if (o->support == "posterior") {
-            options.fixed_nodes = facing_nodes(in.mesh, in.surface, Vec3::UnitY(), 0.5);
+            options.fixed_nodes = surface_nodes_facing(in.mesh, in.surface, Vec3::UnitY(), 0.5);
             logger()->info("register-surface: {} posterior surface nodes held at rest", options.fixed_nodes.size());
         } else if (o->support != "none") {
             fail("--support '{}': use none or posterior", o->support);

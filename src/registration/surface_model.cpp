@@ -134,6 +134,19 @@ LabelledTriangles regions_from_seeds(const VolumeMesh& mesh, const LabelledTrian
     return out;
 }
 
+std::vector<std::int32_t> surface_nodes_facing(const VolumeMesh& mesh, const LabelledTriangles& surface, const Vec3& direction, double cosine)
+{
+    std::vector<Vec3> normal(mesh.node_count(), Vec3::Zero());
+    for (const auto& t : surface.triangles) {
+        const Vec3 area = 0.5 * (mesh.nodes[t[1]] - mesh.nodes[t[0]]).cross(mesh.nodes[t[2]] - mesh.nodes[t[0]]);
+        for (auto n : t) normal[static_cast<std::size_t>(n)] += area;
+    }
+    std::vector<std::int32_t> out;
+    for (std::size_t n = 0; n < normal.size(); ++n)
+        if (normal[n].norm() > 0 && normal[n].normalized().dot(direction) > cosine) out.push_back(static_cast<std::int32_t>(n));
+    return out;
+}
+
 LabelledTriangles unlabelled_boundary(const VolumeMesh& mesh)
 {
     LabelledTriangles out = labelled_boundary(mesh, std::nullopt);

@@ -46,6 +46,10 @@ struct RegionSeed {
 LabelledTriangles regions_from_seeds(const VolumeMesh& mesh, const LabelledTriangles& boundary, const std::vector<RegionSeed>& seeds, double radius_mm,
                                      double max_snap_mm, const std::string& what);
 
+/// Boundary nodes whose area-weighted rest normal points along `direction` (cosine > `cosine`):
+/// the support `register-surface --support posterior` holds.
+std::vector<std::int32_t> surface_nodes_facing(const VolumeMesh& mesh, const LabelledTriangles& surface, const Vec3& direction, double cosine);
+
 /// The boundary of a tetrahedral mesh, every triangle "surface" (0).
 LabelledTriangles unlabelled_boundary(const VolumeMesh& mesh);
 
