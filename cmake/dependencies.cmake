@@ -12,11 +12,17 @@ find_package(ZLIB REQUIRED)
 # not include ITK_USE_FILE: it would put ITK's bundled Eigen on every target's include path ahead
 # of Debian's Eigen 3.4. The image IO factories are registered explicitly in itk_bridge.cpp.
 find_package(ITK 5.2 REQUIRED COMPONENTS
-  ITKCommon ITKIOImageBase ITKIONIFTI ITKIONRRD ITKIOMeta ITKIOGDCM ITKIOPNG)
+  ITKCommon ITKIOImageBase ITKIONIFTI ITKIONRRD ITKIOMeta ITKIOGDCM ITKIOPNG
+  ITKDistanceMap ITKRegistrationMethodsv4 ITKOptimizersv4 ITKMetricsv4 ITKPDEDeformableRegistration
+  ITKDisplacementField ITKImageGrid ITKSmoothing ITKTransform ITKImageIntensity)
 find_package(pugixml REQUIRED)
 find_package(CGAL 5.5 REQUIRED) # Mesh_3: conforming tetrahedral meshes of label volumes (GPL-3.0-or-later)
 find_package(MPI REQUIRED COMPONENTS CXX) # OpenMPI: enrichment database builds across processes and machines
 find_package(NLopt 2.7 REQUIRED) # derivative-free optimisation (BOBYQA, Nelder–Mead): parameter estimation
+# liblbfgs (Debian liblbfgs-dev, MIT; no CMake package): L-BFGS with the Moré–Thuente line search for
+# paper 002's adjoint-gradient estimation.
+find_path(LBFGS_INCLUDE_DIR lbfgs.h REQUIRED)
+find_library(LBFGS_LIBRARY lbfgs REQUIRED)
 # CHOLMOD (SuiteSparse 5, Debian): supernodal Cholesky of the implicit solvers' tangents. Debian's
 # SuiteSparse 5 ships no CMake package, so the header and library are located directly.
 find_path(CHOLMOD_INCLUDE_DIR cholmod.h PATH_SUFFIXES suitesparse REQUIRED)

@@ -16,6 +16,8 @@ packages=(
   libpugixml-dev           # VTU (XML) reading
   libcgal-dev              # CGAL Mesh_3: conforming tetrahedral meshes of label volumes (ground-truth phantom)
   libnlopt-cxx-dev         # BOBYQA / Nelder–Mead: parameter estimation
+  libfftw3-dev             # linked by ITK's registration modules (Demons, B-spline baselines)
+  liblbfgs-dev             # L-BFGS (Nocedal; MIT): paper 002's moduli and boundary-force estimation
   libopenmpi-dev openmpi-bin # enrichment database builds across processes (mpirun)
   zlib1g-dev               # compressed VTU arrays
   python3-matplotlib       # plots of the studies (scripts/study_surface.py)
