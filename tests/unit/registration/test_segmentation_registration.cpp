@@ -116,7 +116,8 @@ TEST(SignedDistanceMap, BallDistancesAndGradientsMatchTheAnalyticValues)
     const SignedDistanceMap map(ball, {3}, "ball");
     std::mt19937 random(5);
     std::uniform_real_distribution<double> unit(-1.0, 1.0);
-    double worst = 0.0, worst_angle = 0.0;
+    double worst = 0.0, angle_sum = 0.0;
+    int angles = 0;
     for (int s = 0; s < 200; ++s) {
         Vec3 dir(unit(random), unit(random), unit(random));
         dir.normalize();
@@ -124,10 +125,22 @@ TEST(SignedDistanceMap, BallDistancesAndGradientsMatchTheAnalyticValues)
         Vec3 g;
         const double phi = map.value_and_gradient(Vec3(16, 16, 16) + r * dir, g);
         worst = std::max(worst, std::abs(phi - (r - 10.0)));
-        if (std::abs(r - 10.0) > 2.0) worst_angle = std::max(worst_angle, std::acos(std::clamp(g.normalized().dot(dir), -1.0, 1.0)));
+        // The gradient is the derivative of the interpolant itself.
+        const Vec3 x = Vec3(16, 16, 16) + r * dir;
+        for (int a = 0; a < 3; ++a) {
+            const double h = 1e-6;
+            EXPECT_NEAR(g[a], (map.value(x + h * Vec3::Unit(a)) - map.value(x - h * Vec3::Unit(a))) / (2 * h), 1e-4);
+        }
+        if (std::abs(r - 10.0) > 0.5 && std::abs(r - 10.0) < 2.5) {
+            angle_sum += std::acos(std::clamp(g.normalized().dot(dir), -1.0, 1.0));
+            ++angles;
+        }
     }
     EXPECT_LT(worst, 0.5);                 // within the voxel size (0.8 mm) of the exact distance
-    EXPECT_LT(worst_angle, 0.25);          // gradient radial within ≈ 14°
+    // Near the interface the gradient is radial on average within ≈ 11° (the voxel staircase tilts
+    // it locally).
+    ASSERT_GT(angles, 20);
+    EXPECT_LT(angle_sum / angles, 0.2) << angle_sum / angles;
     // Beyond the image: growing with the distance to the box.
     EXPECT_GT(map.value(Vec3(-10, 16, 16)), map.value(Vec3(-5, 16, 16)) + 4.9);
     EXPECT_NE(test::error_message([&] { SignedDistanceMap(ball, {7}, "ball label 7"); }).find("empty"), std::string::npos);
