@@ -13,7 +13,7 @@ find_package(ZLIB REQUIRED)
 # of Debian's Eigen 3.4. The image IO factories are registered explicitly in itk_bridge.cpp.
 find_package(ITK 5.2 REQUIRED COMPONENTS
   ITKCommon ITKIOImageBase ITKIONIFTI ITKIONRRD ITKIOMeta ITKIOGDCM ITKIOPNG
-  ITKDistanceMap ITKRegistrationMethodsv4 ITKOptimizersv4 ITKMetricsv4 ITKPDEDeformableRegistration
+  ITKDistanceMap ITKRegistrationMethodsv4 ITKRegistrationCommon ITKOptimizers ITKOptimizersv4 ITKMetricsv4 ITKPDEDeformableRegistration
   ITKDisplacementField ITKImageGrid ITKSmoothing ITKTransform ITKImageIntensity)
 find_package(pugixml REQUIRED)
 find_package(CGAL 5.5 REQUIRED) # Mesh_3: conforming tetrahedral meshes of label volumes (GPL-3.0-or-later)

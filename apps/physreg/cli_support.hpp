@@ -28,6 +28,7 @@ void add_subcommand_phantom(CLI::App& app);
 void add_subcommand_estimate(CLI::App& app);
 void add_subcommand_register_compression(CLI::App& app);
 void add_subcommand_register_surface(CLI::App& app);
+void add_subcommand_register_images(CLI::App& app);
 void add_subcommand_evaluate(CLI::App& app);
 void add_subcommand_enrich(CLI::App& app);
 void add_subcommand_bench(CLI::App& app);

@@ -192,16 +192,6 @@ double young_modulus(const Options& o)
     fail("--material '{}': use healthy (3.5 kPa) or cirrhotic (30 kPa), or give --young-modulus", o.material);
 }
 
-LandmarkSet map_landmarks(const VolumeMesh& mesh, const std::vector<NodeEmbedding>& where, const LandmarkSet& rest, const std::vector<double>& u)
-{
-    LandmarkSet out = rest;
-    for (std::size_t i = 0; i < rest.size(); ++i) {
-        const auto d = interpolate_nodal(mesh, where[i], u, 3);
-        out[i].position += Vec3(d[0], d[1], d[2]);
-    }
-    return out;
-}
-
 struct MethodOutcome {
     std::string name;
     std::vector<double> u;
@@ -224,7 +214,7 @@ json evaluate(const MethodOutcome& m, const Inputs& in, const std::vector<NodeEm
                              {"mean", h.mean_mm()}, {"max", h.max_mm()}};
     }
     if (in.landmarks && in.truth) {
-        const TreReport tre = compute_tre(map_landmarks(in.mesh, landmark_cells, *in.landmarks, m.u), *in.truth, m.name + " landmarks");
+        const TreReport tre = compute_tre(displace_landmarks(in.mesh, landmark_cells, *in.landmarks, m.u), *in.truth, m.name + " landmarks");
         r["tre"] = json::parse(tre_stats_json(tre));
         r["tre_per_landmark"] = json::array();
         for (const auto& e : tre.entries) r["tre_per_landmark"].push_back({{"name", e.name}, {"type", to_string(e.type)}, {"error_mm", e.error_mm}});
@@ -406,7 +396,7 @@ void add_subcommand_register_surface(CLI::App& app)
         write_surface(staging.path() / "registered_surface.ply", regions_surface(in.mesh, in.surface, &chosen.u));
         const ImageGeometry geometry = in.field_geometry ? *in.field_geometry : image_grid_over_mesh(in.mesh, o->field_spacing, 2 * o->field_spacing);
         write_displacement_field(staging.path() / "displacement.nii.gz", sample_displacement_field(in.mesh, chosen.u, geometry).field);
-        if (in.landmarks) write_landmarks(staging.path() / "landmarks.csv", map_landmarks(in.mesh, landmark_cells, *in.landmarks, chosen.u));
+        if (in.landmarks) write_landmarks(staging.path() / "landmarks.csv", displace_landmarks(in.mesh, landmark_cells, *in.landmarks, chosen.u));
 
         json summary;
         summary["command"] = "register-surface";

@@ -26,6 +26,7 @@ int main(int argc, char** argv)
     physreg::cli::add_subcommand_estimate(app);
     physreg::cli::add_subcommand_register_compression(app);
     physreg::cli::add_subcommand_register_surface(app);
+    physreg::cli::add_subcommand_register_images(app);
     physreg::cli::add_subcommand_evaluate(app);
     physreg::cli::add_subcommand_enrich(app);
     physreg::cli::add_subcommand_bench(app);

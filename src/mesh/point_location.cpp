@@ -178,4 +178,15 @@ std::vector<NodeEmbedding> embed_landmarks(const VolumeMesh& mesh, const Landmar
     return out;
 }
 
+LandmarkSet displace_landmarks(const VolumeMesh& mesh, const std::vector<NodeEmbedding>& where, const LandmarkSet& rest, const std::vector<double>& u)
+{
+    if (where.size() != rest.size()) fail("displace_landmarks: {} embeddings for {} landmarks", where.size(), rest.size());
+    LandmarkSet out = rest;
+    for (std::size_t i = 0; i < rest.size(); ++i) {
+        const auto d = interpolate_nodal(mesh, where[i], u, 3);
+        out[i].position += Vec3(d[0], d[1], d[2]);
+    }
+    return out;
+}
+
 } // namespace physreg

@@ -14,6 +14,7 @@
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/boost/graph/helpers.h>
 #include <CGAL/make_mesh_3.h>
+#include <CGAL/refine_mesh_3.h>
 
 #include <algorithm>
 #include <cmath>
@@ -128,6 +129,77 @@ VolumeMesh export_complex(const ComplexType& complex, const std::string& what)
     mesh.validate(what);
     return mesh;
 }
+
+// One surface point per axis direction from a voxel of every connected component of every label:
+// CGAL's default initialisation shoots random rays and can miss a small or distant component (one of
+// the two kidneys of the small phantom was lost), which refinement never recovers. This follows
+// CGAL's initialize_triangulation_from_labeled_image, for our function-based domain.
+void seed_every_component(Complex& complex, const Domain& domain, const LabelVolume& labels, const std::vector<char>& selected)
+{
+    const auto& g = labels.geometry;
+    const std::int64_t n = g.voxel_count();
+    std::vector<char> visited(static_cast<std::size_t>(n), 0);
+    auto& tr = complex.triangulation();
+    const auto cwp = tr.geom_traits().construct_weighted_point_3_object();
+    const auto intersect = domain.construct_intersection_object();
+    const std::int64_t size[3] = {g.size[0], g.size[1], g.size[2]};
+    const auto label_of = [&](std::int64_t i, std::int64_t j, std::int64_t k) -> std::int32_t {
+        if (i < 0 || j < 0 || k < 0 || i >= size[0] || j >= size[1] || k >= size[2]) return 0;
+        const auto l = labels.at(i, j, k);
+        return selected[static_cast<std::size_t>(l)] ? l : 0;
+    };
+    std::vector<std::int64_t> queue;
+    for (std::int64_t k = 0; k < size[2]; ++k)
+        for (std::int64_t j = 0; j < size[1]; ++j)
+            for (std::int64_t i = 0; i < size[0]; ++i) {
+                const std::int32_t l = label_of(i, j, k);
+                const auto v0 = g.linear_index(i, j, k);
+                if (l == 0 || visited[static_cast<std::size_t>(v0)]) continue;
+                // Flood the component (6-connected, same label) so that it is seeded once.
+                queue.assign(1, v0);
+                visited[static_cast<std::size_t>(v0)] = 1;
+                for (std::size_t q = 0; q < queue.size(); ++q) {
+                    const std::int64_t v = queue[q];
+                    const std::int64_t ci = v % size[0], cj = (v / size[0]) % size[1], ck = v / (size[0] * size[1]);
+                    for (int d = 0; d < 6; ++d) {
+                        const std::int64_t ni = ci + (d == 0) - (d == 1), nj = cj + (d == 2) - (d == 3), nk = ck + (d == 4) - (d == 5);
+                        if (label_of(ni, nj, nk) != l) continue;
+                        const auto nv = g.linear_index(ni, nj, nk);
+                        if (visited[static_cast<std::size_t>(nv)]) continue;
+                        visited[static_cast<std::size_t>(nv)] = 1;
+                        queue.push_back(nv);
+                    }
+                }
+                // From the component's middle voxel (in flood order), march each axis to the first voxel of
+                // another label; the segment between the two centres crosses the component's surface.
+                const std::int64_t seed = queue[queue.size() / 2];
+                const std::int64_t si = seed % size[0], sj = (seed / size[0]) % size[1], sk = seed / (size[0] * size[1]);
+                const Vec3 from = g.index_to_physical(Vec3(double(si), double(sj), double(sk)));
+                for (int d = 0; d < 6; ++d) {
+                    std::int64_t step = 1;
+                    while (label_of(si + step * ((d == 0) - (d == 1)), sj + step * ((d == 2) - (d == 3)), sk + step * ((d == 4) - (d == 5))) == l) ++step;
+                    const Vec3 to = g.index_to_physical(Vec3(double(si + step * ((d == 0) - (d == 1))), double(sj + step * ((d == 2) - (d == 3))),
+                                                             double(sk + step * ((d == 4) - (d == 5)))));
+                    const auto hit = intersect(Kernel::Segment_3(Point(from.x(), from.y(), from.z()), Point(to.x(), to.y(), to.z())));
+                    if (std::get<2>(hit) == 0) continue;
+                    const auto wp = cwp(std::get<0>(hit));
+                    typename Triangulation::Locate_type lt;
+                    int li = 0, lj = 0;
+                    const auto cell = tr.locate(wp, lt, li, lj);
+                    if (lt != Triangulation::OUTSIDE_AFFINE_HULL) {
+                        // Skip a point the triangulation would hide (CGAL's own check).
+                        if (tr.dimension() == 1 && tr.side_of_power_segment(cell, wp, true) != CGAL::ON_BOUNDED_SIDE) continue;
+                        if (tr.dimension() == 2 && tr.side_of_power_circle(cell, 3, wp, true) != CGAL::ON_BOUNDED_SIDE) continue;
+                        if (tr.dimension() == 3 && tr.side_of_power_sphere(cell, wp, true) != CGAL::ON_BOUNDED_SIDE) continue;
+                    }
+                    const auto vertex = tr.insert(wp);
+                    if (vertex == typename Triangulation::Vertex_handle()) continue;
+                    complex.set_dimension(vertex, 2);
+                    complex.set_index(vertex, std::get<1>(hit));
+                }
+            }
+    if (tr.dimension() != 3) CGAL::Mesh_3::internal::init_c3t3(complex, domain, Criteria(CGAL::parameters::facet_angle = 25), 20);
+}
 } // namespace
 
 void TetMeshingOptions::validate() const
@@ -180,7 +252,12 @@ VolumeMesh mesh_labels_tetrahedral(const LabelVolume& labels, const TetMeshingOp
     CGAL::get_default_random() = CGAL::Random(options.seed);
     Complex complex;
     try {
-        complex = CGAL::make_mesh_3<Complex>(domain, criteria, params::no_perturb(), params::no_exude());
+        if (options.seed_every_component) {
+            seed_every_component(complex, domain, labels, selected);
+            CGAL::refine_mesh_3(complex, domain, criteria, params::no_perturb(), params::no_exude());
+        } else {
+            complex = CGAL::make_mesh_3<Complex>(domain, criteria, params::no_perturb(), params::no_exude());
+        }
         if (options.exude) CGAL::exude_mesh_3(complex, params::sliver_bound = 12.0);
     } catch (const std::exception& e) {
         fail("{}: CGAL Mesh_3 failed: {}", what, e.what());

@@ -44,5 +44,7 @@ std::vector<double> interpolate_nodal(const VolumeMesh& mesh, const NodeEmbeddin
 /// `max_distance_mm` with barycentric weights clamped to it (a surface landmark just outside a
 /// smooth mesh); farther points are an Error naming the landmark and `what`.
 std::vector<NodeEmbedding> embed_landmarks(const VolumeMesh& mesh, const LandmarkSet& points, double max_distance_mm, const std::string& what);
+/// The landmarks moved by the nodal displacement u (mm, 3 per node) at their embeddings.
+LandmarkSet displace_landmarks(const VolumeMesh& mesh, const std::vector<NodeEmbedding>& where, const LandmarkSet& rest, const std::vector<double>& u);
 
 } // namespace physreg

@@ -29,6 +29,10 @@ struct TetMeshingOptions {
     double radius_edge_ratio = 2.5;                ///< largest circumradius / shortest edge of a cell
     bool exude = true;                             ///< sliver exudation (to its end: no time limit, so reproducible)
     unsigned seed = 1;                             ///< CGAL's random generator (the same seed, the same mesh)
+    /// Seed CGAL's surface with points on every connected component of every label. CGAL's default
+    /// random rays can miss a small or distant component (one kidney of the small phantom); off by
+    /// default for now because it changes every existing mesh (the phantom's ground truth included).
+    bool seed_every_component = false;
     void validate() const;
 };
 

@@ -146,6 +146,40 @@ TEST(SignedDistanceMap, BallDistancesAndGradientsMatchTheAnalyticValues)
     EXPECT_NE(test::error_message([&] { SignedDistanceMap(ball, {7}, "ball label 7"); }).find("empty"), std::string::npos);
 }
 
+TEST(SegmentationRegistration, EveryConnectedComponentOfALabelIsMeshed)
+{
+    // Two small balls of one label, far apart in a large empty volume: CGAL's random initial rays may
+    // miss one; seeding every component must mesh both.
+    const Vec3 centres[2] = {Vec3(8, 8, 8), Vec3(52, 50, 47)};
+    const LabelVolume labels = test::make_volume({60, 60, 56}, [&](int i, int j, int k) -> std::uint16_t {
+        for (const Vec3& c : centres)
+            if ((Vec3(i, j, k) - c).norm() < 3.5) return 1;
+        return 0;
+    });
+    TetMeshingOptions o;
+    o.default_cell_size_mm = 2.0;
+    o.facet_size_mm = 2.0;
+    o.facet_distance_mm = 0.3;
+    o.seed_every_component = true;
+    const VolumeMesh mesh = mesh_labels_tetrahedral(labels, o, "two balls");
+    double volume[2] = {0, 0};
+    for (std::size_t c = 0; c < mesh.cell_count(); ++c) {
+        Vec3 centroid = Vec3::Zero();
+        for (int a = 0; a < 4; ++a) centroid += mesh.nodes[static_cast<std::size_t>(mesh.cells[4 * c + a])] / 4.0;
+        const Vec3 &p0 = mesh.nodes[static_cast<std::size_t>(mesh.cells[4 * c])], &p1 = mesh.nodes[static_cast<std::size_t>(mesh.cells[4 * c + 1])],
+                   &p2 = mesh.nodes[static_cast<std::size_t>(mesh.cells[4 * c + 2])], &p3 = mesh.nodes[static_cast<std::size_t>(mesh.cells[4 * c + 3])];
+        const double v = std::abs((p1 - p0).cross(p2 - p0).dot(p3 - p0)) / 6.0;
+        for (int b = 0; b < 2; ++b)
+            if ((centroid - centres[b]).norm() < 6.0) volume[b] += v;
+    }
+    // Ball of radius 3.5 voxels on a voxel lattice: 179 voxels (mm³); the mesh follows the labelled
+    // interpolation, so allow ±30 %.
+    for (int b = 0; b < 2; ++b) {
+        EXPECT_GT(volume[b], 0.7 * 179.0) << "ball " << b;
+        EXPECT_LT(volume[b], 1.3 * 179.0) << "ball " << b;
+    }
+}
+
 TEST(SegmentationRegistration, MultiStructureMeshIsConformingAndTheObjectiveSeesEveryBoundary)
 {
     const LabelVolume labels = cube_with_inclusion();
