@@ -33,7 +33,7 @@ expect_no_file() {
 expect_ok "--version" "$physreg" --version
 grep -q "physreg 0" "$work/out.txt" && pass || failed "--version prints the version"
 expect_ok "--help" "$physreg" --help
-for sub in mesh coarsen info convert demo phantom estimate register-compression register-surface evaluate "landmarks locate" "enrich build" "enrich apply" "bench enrich"; do
+for sub in mesh coarsen info convert demo phantom estimate register-compression register-surface register-images evaluate "landmarks locate" "enrich build" "enrich apply" "bench enrich"; do
   expect_ok "$sub --help" "$physreg" $sub --help
 done
 
@@ -221,6 +221,68 @@ expect_error "register-surface: open surface" "not closed" "$physreg" $rs --surf
 expect_no_file "$work/rs_bad8"
 expect_error "register-surface: vessels without the heterogeneous model" "only the heterogeneous model" "$physreg" $rs --dataset "$work/ph" --visible 50 \
   --vessels "$work/ph/rest/vessel_centrelines.csv" -o "$work/rs_bad9"
+
+# physreg register-images (paper 002) on the small phantom's insufflation pair: the biomechanical
+# method with label baselines, then bad inputs (each: clear message, non-zero exit, no output).
+ri="--log-level warn register-images --cycles 4 --cell-size 8"
+expect_ok "register-images dataset" "$physreg" $ri --dataset "$work/ph" --baselines labels -o "$work/ri" --json
+for f in warped_labels.nii.gz warped_moving.nii.gz displacement.nii.gz landmarks.csv mesh.vtu parameters.json summary.json; do
+  expect_file "$work/ri/$f"
+done
+for key in '"biomechanical"' '"bspline_labels"' '"demons_labels"' '"rigid_labels"' '"dice"' '"internal"' '"estimated_moduli_pa"'; do
+  grep -q "$key" "$work/ri/summary.json" && pass || failed "register-images summary lacks $key"
+done
+expect_ok "register-images: the written field reads back" "$physreg" info "$work/ri/displacement.nii.gz"
+# A label map edited with Python's standard library: a label removed, or the image moved away.
+edit_nifti() { # IN OUT MODE(remove:LABEL | shift:MM)
+  python3 - "$@" <<'PY'
+import gzip, struct, sys
+src, dst, mode = sys.argv[1], sys.argv[2], sys.argv[3]
+data = bytearray(gzip.open(src).read())
+offset = int(struct.unpack_from('<f', data, 108)[0])
+kind, value = mode.split(':')
+if kind == 'remove':
+    code = struct.unpack_from('<h', data, 70)[0]
+    fmt = {2: 'B', 4: 'h', 8: 'i', 256: 'b', 512: 'H', 768: 'I'}[code]
+    size = struct.calcsize(fmt)
+    for at in range(offset, len(data) - size + 1, size):
+        if struct.unpack_from('<' + fmt, data, at)[0] == int(value):
+            struct.pack_into('<' + fmt, data, at, 0)
+else:
+    for at in (268, 292):  # qoffset_x and srow_x[3]
+        struct.pack_into('<f', data, at, struct.unpack_from('<f', data, at)[0] + float(value))
+open(dst, 'wb').write(gzip.compress(bytes(data)))
+PY
+}
+st="$work/ph/states/insufflation"; rest="$work/ph/rest"
+edit_nifti "$st/labels.nii.gz" "$work/fixed_no_kidney.nii.gz" remove:6
+expect_error "register-images: a label in the moving image only" "structure 6 is in the moving segmentation only" \
+  "$physreg" $ri --fixed "$st/intensity.nii.gz" --fixed-labels "$work/fixed_no_kidney.nii.gz" --moving "$rest/intensity.nii.gz" \
+  --moving-labels "$rest/labels.nii.gz" --structures 2,3,4,6 --anchor 0.01 -o "$work/ri_bad1"
+expect_no_file "$work/ri_bad1"
+edit_nifti "$rest/labels.nii.gz" "$work/moving_no_lesion.nii.gz" remove:3
+expect_error "register-images: organ sets differ" "is in the fixed segmentation only" \
+  "$physreg" $ri --fixed "$st/intensity.nii.gz" --fixed-labels "$st/labels.nii.gz" --moving "$rest/intensity.nii.gz" \
+  --moving-labels "$work/moving_no_lesion.nii.gz" --anchor 0.01 -o "$work/ri_bad2"
+expect_no_file "$work/ri_bad2"
+edit_nifti "$st/labels.nii.gz" "$work/fixed_far_labels.nii.gz" shift:5000
+edit_nifti "$st/intensity.nii.gz" "$work/fixed_far.nii.gz" shift:5000
+expect_error "register-images: images without overlap" "do not overlap" \
+  "$physreg" $ri --fixed "$work/fixed_far.nii.gz" --fixed-labels "$work/fixed_far_labels.nii.gz" --moving "$rest/intensity.nii.gz" \
+  --moving-labels "$rest/labels.nii.gz" --structures 2,3,4,6 --anchor 0.01 -o "$work/ri_bad3"
+expect_no_file "$work/ri_bad3"
+# The surface-displacement unknowns hold the whole boundary; nodal forces alone need a support.
+expect_error "register-images: singular stiffness" "singular" \
+  "$physreg" $ri --fixed "$st/intensity.nii.gz" --fixed-labels "$st/labels.nii.gz" --moving "$rest/intensity.nii.gz" \
+  --moving-labels "$rest/labels.nii.gz" --structures 2,3,4,6 --hold none --parametrisation nodal-forces -o "$work/ri_bad4"
+expect_no_file "$work/ri_bad4"
+printf 'tissues:\n  - {label: 2, name: liver, young_modulus_pa: -5, poisson_ratio: 0.45}\n' > "$work/neg_tissue.yaml"
+expect_error "register-images: non-positive initial E" "young_modulus_pa" \
+  "$physreg" $ri --dataset "$work/ph" --tissues "$work/neg_tissue.yaml" -o "$work/ri_bad5"
+expect_no_file "$work/ri_bad5"
+expect_error "register-images: empty structure" "structure 9 is empty in both" \
+  "$physreg" $ri --dataset "$work/ph" --structures 2,9 -o "$work/ri_bad6"
+expect_error "register-images: unknown method" "--method 'affine'" "$physreg" $ri --dataset "$work/ph" --method affine -o "$work/ri_bad7"
 
 # physreg estimate / register-compression / evaluate on the small phantom (≈ 5 mm cells).
 g="--grid 36x27x12"

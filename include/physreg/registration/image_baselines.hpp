@@ -4,8 +4,11 @@
 //   (intensity) or mean squares (labels), regular-step gradient descent, 3 levels (shrink 4/2/1).
 // - demons: DiffeomorphicDemonsRegistrationFilter in a 3-level MultiResolutionPDEDeformable-
 //   Registration (intensities histogram-matched first), Gaussian field regularisation.
-// - bspline: BSplineTransform (cubic) by ImageRegistrationMethodv4 with L-BFGS-B, mean squares,
-//   3 levels with the control grid refined ×2 per level (BSplineTransformParametersAdaptor).
+// - bspline: cubic BSplineTransform, mean squares minimised by ITK's L-BFGS-B, 3 levels (image
+//   smoothing σ 2/1/0 voxels) with the control grid refined ×2 per level (BSplineTransform-
+//   ParametersAdaptor); the mean squares and its sparse gradient are ours (ITK 5.2's metrics are
+//   dense in the parameters, and its sparse Mattes metric drifted on identical images).
+//   No bending-energy penalty: inside a uniform structure the control points see no data.
 // Each runs on the intensities or on the label maps (labels turned into a smooth image: each
 // structure a distinct grey value, Gaussian σ = 1 voxel), so every report compares both.
 // The result is a dense field on the fixed grid in ITK's convention: the fixed point x maps to the
@@ -40,8 +43,9 @@ struct BaselineResult {
     std::map<std::string, double> figures;  ///< metric value, iterations, rotation, …
 };
 
-/// Registers `moving` onto `fixed` (any grids, physical LPS space). `labels_mode`: the inputs
-/// are label-derived images (mean squares everywhere, no histogram matching). Throws Error when
+/// Registers `moving` onto `fixed` (any grids for rigid and B-spline, one grid for Demons; physical
+/// LPS space). `labels_mode`: the inputs are label-derived images (mean squares for the rigid
+/// method, no histogram matching for Demons). Throws Error when
 /// the images do not overlap or ITK fails (its message included).
 BaselineResult register_baseline(const ScalarImage& fixed, const ScalarImage& moving, BaselineMethod method, bool labels_mode,
                                  const BaselineOptions& options);

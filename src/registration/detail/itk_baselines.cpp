@@ -310,7 +310,7 @@ private:
     std::vector<double> values_;
 };
 
-PlainBaselineResult bspline(const Image::Pointer& fixed, const Image::Pointer& moving, bool labels_mode, const PlainBaselineOptions& o)
+PlainBaselineResult bspline(const Image::Pointer& fixed, const Image::Pointer& moving, const PlainBaselineOptions& o)
 {
     using Optimizer = itk::LBFGSBOptimizer;
     auto transform = BSpline::New();
@@ -365,7 +365,6 @@ PlainBaselineResult bspline(const Image::Pointer& fixed, const Image::Pointer& m
         metric_value = optimizer->GetValue();
         iterations += static_cast<int>(optimizer->GetCurrentIteration());
     }
-    (void)labels_mode;
     PlainBaselineResult r;
     r.field = field_of(*transform, fixed.GetPointer());
     r.figures.emplace_back("final_mean_squares", metric_value);
@@ -383,7 +382,7 @@ PlainBaselineResult itk_register_baseline(const PlainImage& fixed, const PlainIm
     try {
         if (o.method == "rigid") return rigid(f, m, o.labels_mode, o);
         if (o.method == "demons") return demons(f, m, o.labels_mode, o);
-        if (o.method == "bspline") return bspline(f, m, o.labels_mode, o);
+        if (o.method == "bspline") return bspline(f, m, o); // mean squares for both inputs
     } catch (const itk::ExceptionObject& e) {
         fail("{} registration ({}): ITK failed: {}", o.method, o.labels_mode ? "labels" : "intensity", e.GetDescription());
     }
