@@ -55,11 +55,11 @@ bool invert_field_at(const DisplacementField& field, const Vec3& target, Vec3& y
     return false;
 }
 
-LabelVolume resample_labels(const LabelVolume& moving, const DisplacementField& field)
+namespace {
+// Calls visit(v, p) for every voxel v of the field's grid with p = x_v + u(x_v), in parallel.
+template <typename Visit>
+void for_each_mapped_voxel(const DisplacementField& field, Visit&& visit)
 {
-    LabelVolume out;
-    out.geometry = field.geometry;
-    out.labels.assign(static_cast<std::size_t>(field.geometry.voxel_count()), 0);
     const ImageGeometry& g = field.geometry;
 #pragma omp parallel for schedule(static)
     for (std::int64_t k = 0; k < g.size[2]; ++k)
@@ -67,16 +67,26 @@ LabelVolume resample_labels(const LabelVolume& moving, const DisplacementField& 
             for (std::int64_t i = 0; i < g.size[0]; ++i) {
                 const auto v = static_cast<std::size_t>(g.linear_index(i, j, k));
                 const Vec3 x = g.index_to_physical(Vec3(i, j, k));
-                const Vec3 p = x + Vec3(field.components[3 * v], field.components[3 * v + 1], field.components[3 * v + 2]);
-                const Vec3 index = moving.geometry.physical_to_index(p);
-                std::int64_t n[3];
-                bool inside = true;
-                for (int a = 0; a < 3; ++a) {
-                    n[a] = static_cast<std::int64_t>(std::llround(index[a]));
-                    inside = inside && n[a] >= 0 && n[a] < moving.geometry.size[a];
-                }
-                if (inside) out.labels[v] = moving.at(n[0], n[1], n[2]);
+                visit(v, Vec3(x + Vec3(field.components[3 * v], field.components[3 * v + 1], field.components[3 * v + 2])));
             }
+}
+} // namespace
+
+LabelVolume resample_labels(const LabelVolume& moving, const DisplacementField& field)
+{
+    LabelVolume out;
+    out.geometry = field.geometry;
+    out.labels.assign(static_cast<std::size_t>(field.geometry.voxel_count()), 0);
+    for_each_mapped_voxel(field, [&](std::size_t v, const Vec3& p) {
+        const Vec3 index = moving.geometry.physical_to_index(p);
+        std::int64_t n[3];
+        bool inside = true;
+        for (int a = 0; a < 3; ++a) {
+            n[a] = static_cast<std::int64_t>(std::llround(index[a]));
+            inside = inside && n[a] >= 0 && n[a] < moving.geometry.size[a];
+        }
+        if (inside) out.labels[v] = moving.at(n[0], n[1], n[2]);
+    });
     return out;
 }
 
@@ -85,18 +95,11 @@ ScalarImage resample_image(const ScalarImage& moving, const DisplacementField& f
     ScalarImage out;
     out.geometry = field.geometry;
     out.values.assign(static_cast<std::size_t>(field.geometry.voxel_count()), outside);
-    const ImageGeometry& g = field.geometry;
-#pragma omp parallel for schedule(static)
-    for (std::int64_t k = 0; k < g.size[2]; ++k)
-        for (std::int64_t j = 0; j < g.size[1]; ++j)
-            for (std::int64_t i = 0; i < g.size[0]; ++i) {
-                const auto v = static_cast<std::size_t>(g.linear_index(i, j, k));
-                const Vec3 x = g.index_to_physical(Vec3(i, j, k));
-                const Vec3 p = x + Vec3(field.components[3 * v], field.components[3 * v + 1], field.components[3 * v + 2]);
-                double value = 0.0;
-                if (trilinear(moving.geometry, moving.geometry.physical_to_index(p), [&](std::size_t m, double w) { value += w * moving.values[m]; }))
-                    out.values[v] = static_cast<float>(value);
-            }
+    for_each_mapped_voxel(field, [&](std::size_t v, const Vec3& p) {
+        double value = 0.0;
+        if (trilinear(moving.geometry, moving.geometry.physical_to_index(p), [&](std::size_t m, double w) { value += w * moving.values[m]; }))
+            out.values[v] = static_cast<float>(value);
+    });
     return out;
 }
 

@@ -137,15 +137,21 @@ LinearElasticModel::LinearElasticModel(const VolumeMesh& mesh, const LinearElast
     // Pattern of the reduced K (both triangles), then each element entry's value index.
     std::vector<Eigen::Triplet<double, int>> triplets;
     triplets.reserve(144 * cells + static_cast<std::size_t>(free_dofs));
-    for (std::size_t c = 0; c < cells; ++c)
-        for (int a = 0; a < 4; ++a)
-            for (int b = 0; b < 4; ++b)
-                for (int i = 0; i < 3; ++i)
-                    for (int k = 0; k < 3; ++k) {
-                        const auto r = m_dof_of[3 * static_cast<std::size_t>(m_cells[4 * c + static_cast<std::size_t>(a)]) + static_cast<std::size_t>(i)];
-                        const auto s = m_dof_of[3 * static_cast<std::size_t>(m_cells[4 * c + static_cast<std::size_t>(b)]) + static_cast<std::size_t>(k)];
-                        if (r >= 0 && s >= 0) triplets.emplace_back(r, s, 1.0);
-                    }
+    // visit(c, entry, r, s): element c's 12×12 entry (row-major) and its reduced row/column (−1: held).
+    const auto for_each_entry = [&](auto&& visit) {
+        for (std::size_t c = 0; c < cells; ++c)
+            for (int a = 0; a < 4; ++a)
+                for (int b = 0; b < 4; ++b)
+                    for (int i = 0; i < 3; ++i)
+                        for (int k = 0; k < 3; ++k) {
+                            const auto r = m_dof_of[3 * static_cast<std::size_t>(m_cells[4 * c + static_cast<std::size_t>(a)]) + static_cast<std::size_t>(i)];
+                            const auto s = m_dof_of[3 * static_cast<std::size_t>(m_cells[4 * c + static_cast<std::size_t>(b)]) + static_cast<std::size_t>(k)];
+                            visit(c, static_cast<std::size_t>((3 * a + i) * 12 + 3 * b + k), r, s);
+                        }
+    };
+    for_each_entry([&](std::size_t, std::size_t, std::int32_t r, std::int32_t s) {
+        if (r >= 0 && s >= 0) triplets.emplace_back(r, s, 1.0);
+    });
     for (std::int32_t d = 0; d < free_dofs; ++d) triplets.emplace_back(d, d, 1.0);
     m_k.resize(free_dofs, free_dofs);
     m_k.setFromTriplets(triplets.begin(), triplets.end());
@@ -156,15 +162,9 @@ LinearElasticModel::LinearElasticModel(const VolumeMesh& mesh, const LinearElast
         return static_cast<std::int32_t>(std::lower_bound(begin, end, r) - m_k.innerIndexPtr());
     };
     m_entry.resize(144 * cells);
-    for (std::size_t c = 0; c < cells; ++c)
-        for (int a = 0; a < 4; ++a)
-            for (int b = 0; b < 4; ++b)
-                for (int i = 0; i < 3; ++i)
-                    for (int k = 0; k < 3; ++k) {
-                        const auto r = m_dof_of[3 * static_cast<std::size_t>(m_cells[4 * c + static_cast<std::size_t>(a)]) + static_cast<std::size_t>(i)];
-                        const auto s = m_dof_of[3 * static_cast<std::size_t>(m_cells[4 * c + static_cast<std::size_t>(b)]) + static_cast<std::size_t>(k)];
-                        m_entry[144 * c + static_cast<std::size_t>((3 * a + i) * 12 + 3 * b + k)] = (r >= 0 && s >= 0) ? value_index(r, s) : -1;
-                    }
+    for_each_entry([&](std::size_t c, std::size_t entry, std::int32_t r, std::int32_t s) {
+        m_entry[144 * c + entry] = (r >= 0 && s >= 0) ? value_index(r, s) : -1;
+    });
     m_diagonal_entry.resize(static_cast<std::size_t>(free_dofs));
     for (std::int32_t d = 0; d < free_dofs; ++d) m_diagonal_entry[static_cast<std::size_t>(d)] = value_index(d, d);
 }

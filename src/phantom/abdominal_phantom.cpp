@@ -191,7 +191,7 @@ double SeededRandom::normal()
     return r * std::cos(2 * M_PI * u2);
 }
 
-ScalarImage synthesize_mr_intensity(const LabelVolume& labels, const LabelRoles& roles, std::uint64_t seed)
+ScalarImage synthesize_clean_mr_intensity(const LabelVolume& labels, const LabelRoles& roles, std::uint64_t seed)
 {
     auto mean_of = [&](std::int32_t label) -> float {
         const std::string role = roles.role_of(label);
@@ -217,7 +217,6 @@ ScalarImage synthesize_mr_intensity(const LabelVolume& labels, const LabelRoles&
         dir.normalize();
         waves.push_back({M_PI * dir.cwiseQuotient(extent), 2 * M_PI * random.uniform(), 0.04 + 0.03 * random.uniform()});
     }
-    const double sigma = 0.02 * 520.0;
     for (std::int64_t k = 0; k < g.size[2]; ++k)
         for (std::int64_t j = 0; j < g.size[1]; ++j)
             for (std::int64_t i = 0; i < g.size[0]; ++i) {
@@ -226,10 +225,25 @@ ScalarImage synthesize_mr_intensity(const LabelVolume& labels, const LabelRoles&
                 const Vec3 p = g.spacing.cwiseProduct(index);
                 double bias = 1.0;
                 for (const auto& w : waves) bias += w.weight * std::cos(w.k.dot(p) + w.phase);
-                const double clean = bias * mean_of(labels.labels[v]);
-                const double n1 = sigma * random.normal(), n2 = sigma * random.normal();
-                image.values[v] = static_cast<float>(std::hypot(clean + n1, n2)); // Rician magnitude
+                image.values[v] = static_cast<float>(bias * mean_of(labels.labels[v]));
             }
+    return image;
+}
+
+void add_mr_noise(ScalarImage& image, std::uint64_t seed)
+{
+    SeededRandom random(seed);
+    const double sigma = 0.02 * 520.0;
+    for (auto& value : image.values) {
+        const double n1 = sigma * random.normal(), n2 = sigma * random.normal();
+        value = static_cast<float>(std::hypot(double(value) + n1, n2)); // Rician magnitude
+    }
+}
+
+ScalarImage synthesize_mr_intensity(const LabelVolume& labels, const LabelRoles& roles, std::uint64_t seed)
+{
+    ScalarImage image = synthesize_clean_mr_intensity(labels, roles, seed);
+    add_mr_noise(image, seed ^ 0x9e3779b97f4a7c15ull);
     return image;
 }
 

@@ -537,7 +537,8 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
 
     report(0.0, "anatomy");
     Prepared p = prepare_labels(spec);
-    const ScalarImage intensity = synthesize_mr_intensity(p.labels, p.roles, mix_seed(spec.seed, "intensity"));
+    // Each state's image: the noise-free image warped, then noise of its own (independent scans).
+    const ScalarImage intensity = synthesize_clean_mr_intensity(p.labels, p.roles, mix_seed(spec.seed, "intensity"));
     Vec3 liver_lo, liver_hi;
     const Vec3 liver_centre = liver_centroid(p, liver_lo, liver_hi);
     timings["anatomy_s"] = seconds_since(clock0);
@@ -718,6 +719,7 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
                                                [&](const fs::path& f) { write_displacement_field(f, forward.field); });
         }
         files["labels"] = write_file(root, dir + "/labels.nii.gz", [&](const fs::path& f) { write_label_volume(f, labels); });
+        add_mr_noise(image, mix_seed(spec.seed, "intensity/" + name));
         files["intensity"] = write_file(root, dir + "/intensity.nii.gz", [&](const fs::path& f) { write_scalar_image(f, image); });
         MeshData data;
         data.point_data.push_back({"displacement", 3, u});

@@ -48,6 +48,14 @@ std::vector<VesselBranch> cirs057a_vessel_centrelines();
 /// drawn from `seed`. Arbitrary units.
 ScalarImage synthesize_mr_intensity(const LabelVolume& labels, const LabelRoles& roles, std::uint64_t seed);
 
+/// The same without the noise: what the deformed states warp, so that each scan gets noise of its
+/// own (a noise pattern carried along with the tissue would hand intensity-based registration
+/// landmarks no real pair of scans has).
+ScalarImage synthesize_clean_mr_intensity(const LabelVolume& labels, const LabelRoles& roles, std::uint64_t seed);
+
+/// Rician magnitude noise of σ = 2 % of the liver's mean intensity, drawn from `seed`.
+void add_mr_noise(ScalarImage& image, std::uint64_t seed);
+
 /// A portable seeded random stream (SplitMix64 + Box–Muller): identical on every platform.
 class SeededRandom {
 public:

@@ -1,0 +1,3 @@
+#include "registration/test_segmentation_registration.cpp"
+#include "registration/test_image_baselines.cpp"
+#include "test_support.cpp"
