@@ -272,38 +272,61 @@ TEST_P(AdjointGradient, EqualsCentralFiniteDifferences)
     model.set_young_moduli(moduli);
     std::mt19937 random(11);
     std::normal_distribution<double> normal(0.0, 1.0);
-    Eigen::VectorXd x(3 * static_cast<Eigen::Index>(p.force_nodes.size()));
-    for (auto& v : x) v = (mode == BoundaryParametrisation::nodal_forces ? 0.02 : 0.5) * normal(random);
     const double scale = model.mean_diagonal_n_mm();
-    const auto phi = [&](const Eigen::VectorXd& at) {
-        return evaluate_segmentation_gradient(model, *p.objective, p.force_nodes, mode, scale, at).objective_mm2;
+    // Φ is only piecewise smooth: the trilinear distance maps' gradients jump on voxel-cell faces,
+    // and a boundary node that crosses one inside ±h makes a central difference straddle a kink
+    // (where that happens depends on the exact mesh, i.e. on the build — one build's point sat
+    // on a kink in every direction). A difference counts only where it agrees with the one at
+    // half the step — no kink inside — and every one that counts must match the adjoint; random
+    // points are drawn until enough have counted.
+    const auto smooth_difference = [](const auto& along, double h, double agreement, double& fd) {
+        const double full = (along(h) - along(-h)) / (2 * h);
+        const double half = (along(h / 2) - along(-h / 2)) / h;
+        fd = half;
+        return std::abs(full - half) <= agreement * std::abs(half);
     };
-    const SegmentationGradient g = evaluate_segmentation_gradient(model, *p.objective, p.force_nodes, mode, scale, x);
-    ASSERT_GT(g.objective_mm2, 0.0);
-    // Directional derivatives along random boundary directions (h small enough that the
-    // trilinear distance maps' cell faces are crossed by almost no node).
-    for (int trial = 0; trial < 3; ++trial) {
-        Eigen::VectorXd v(x.size());
-        for (auto& e : v) e = normal(random);
-        const double h = 1e-6;
-        const double fd = (phi(x + h * v) - phi(x - h * v)) / (2 * h);
-        EXPECT_NEAR(g.d_force.dot(v), fd, 1e-5 * std::abs(fd)) << "boundary direction " << trial;
+    int directions = 0;
+    std::vector<int> modulus_checks(2, 0);
+    for (int point = 0; point < 4 && (directions < 3 || modulus_checks[0] == 0 || modulus_checks[1] == 0); ++point) {
+        model.set_young_moduli(moduli);
+        Eigen::VectorXd x(3 * static_cast<Eigen::Index>(p.force_nodes.size()));
+        for (auto& v : x) v = (mode == BoundaryParametrisation::nodal_forces ? 0.02 : 0.5) * normal(random);
+        const auto phi = [&](const Eigen::VectorXd& at) {
+            return evaluate_segmentation_gradient(model, *p.objective, p.force_nodes, mode, scale, at).objective_mm2;
+        };
+        const SegmentationGradient g = evaluate_segmentation_gradient(model, *p.objective, p.force_nodes, mode, scale, x);
+        ASSERT_GT(g.objective_mm2, 0.0);
+        // Directional derivatives along random boundary directions.
+        for (int trial = 0; trial < 4; ++trial) {
+            Eigen::VectorXd v(x.size());
+            for (auto& e : v) e = normal(random);
+            double fd = 0.0;
+            if (!smooth_difference([&](double t) { return phi(x + t * v); }, 1e-6, 1e-7, fd)) continue;
+            ++directions;
+            EXPECT_NEAR(g.d_force.dot(v), fd, 1e-5 * std::abs(fd)) << "point " << point << ", boundary direction " << trial;
+        }
+        // Each log-modulus (all nodes move; the re-factorised solve's round-off is ≈ 1e-12 Φ, so
+        // the steps are larger).
+        for (std::size_t j = 0; j < 2; ++j) {
+            const auto along = [&](double t) {
+                std::vector<double> e = moduli;
+                e[j] *= std::exp(t);
+                model.set_young_moduli(e);
+                return phi(x);
+            };
+            for (double h : {1e-4, 3e-5, 1e-5}) {
+                double fd = 0.0;
+                if (!smooth_difference(along, h, 2e-6, fd)) continue;
+                ++modulus_checks[j];
+                EXPECT_NEAR(g.d_log_modulus[j], fd, 1e-5 * std::abs(fd)) << "point " << point << ", modulus " << j;
+                EXPECT_GT(std::abs(fd), 1e-6 * g.objective_mm2);
+                break;
+            }
+        }
     }
-    // Each log-modulus.
-    for (std::size_t j = 0; j < 2; ++j) {
-        const double h = 1e-6;
-        std::vector<double> e = moduli;
-        e[j] *= std::exp(h);
-        model.set_young_moduli(e);
-        const double plus = phi(x);
-        e = moduli;
-        e[j] *= std::exp(-h);
-        model.set_young_moduli(e);
-        const double minus = phi(x);
-        const double fd = (plus - minus) / (2 * h);
-        EXPECT_NEAR(g.d_log_modulus[j], fd, 1e-5 * std::abs(fd)) << "modulus " << j;
-        EXPECT_GT(std::abs(fd), 1e-6 * g.objective_mm2);
-    }
+    EXPECT_GE(directions, 3) << "too few random directions free of voxel-cell faces within ±1e-6";
+    EXPECT_GE(modulus_checks[0], 1);
+    EXPECT_GE(modulus_checks[1], 1);
 }
 
 INSTANTIATE_TEST_SUITE_P(SegmentationRegistration, AdjointGradient,
