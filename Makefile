@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 # The two commands: `make demo` (main job) and `make test` (whole test suite). Each installs missing
 # Debian packages, configures, builds (Release, -j2) and runs.
 BUILD ?= build

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Backward Euler steps of the SOFA liver (ModelOrderReduction's liverFine.vtu: 4 293 nodes,
 // 22 019 linear tetrahedra) with paper 001's mechanics: co-rotational linear tetrahedra, healthy
 // liver E = 3.5 kPa, ν = 0.45, ρ = 1000 kg/m³, Rayleigh damping α = 0.1 /s, β = 0.1 s, lumped

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // The spectrum that sets dynamic relaxation's speed: Lanczos on the mass-scaled tangent stiffness
 // M^{-1/2} K M^{-1/2} (M the relaxation's masses, K by central differences of the TLED forces) of
 // the high-resolution and coarse liver models, at rest and at the final depth of compressions

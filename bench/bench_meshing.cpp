@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Meshing time and peak memory for a 512×512×300 label volume at full resolution (one hexahedron
 // per voxel), the size of an abdominal CT. Two occupancies: a liver-sized organ (≈ 1.6 l, about
 // 4 % of the voxels, as in the MSD masks) and a whole-abdomen label (≈ 30 % of the voxels).

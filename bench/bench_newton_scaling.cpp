@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Cost of a static solve against mesh size, per solver: Newton with CHOLMOD, Newton with the
 // stale-factor PCG, and dynamic relaxation, on blocks of about 10 k, 50 k, 200 k and 1 M hexahedra
 // (and 20 k) (1 mm cells, E = 200 kPa, ν = 0.49, base fixed) pressed 1 mm by a sphere of radius width/6, then

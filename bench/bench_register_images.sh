@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-3.0-or-later
 # Run time of paper 002's biomechanical registration (physreg register-images, no baselines) on the
 # phantom's insufflated organs (segmentation pair), for a model-size sweep (--cell-size), each run
 # REPEAT times in this one session; the split (factorisations, solves, meshing) comes from the

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-3.0-or-later
 # Run time of paper 001's registration (physreg register-surface) on the phantom's insufflated
 # liver, 30 % of the surface visible: homogeneous vs heterogeneous (capsule + vessel beams),
 # free-floating and with the posterior surface held, each run REPEAT times in this one session

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // TLED throughput: hexahedral element-steps per second of explicit dynamics (Neo-Hookean,
 // ν = 0.49, hourglass control on) for 24×18×18 and 74×18×54 blocks, 1 and 2 threads, single and
 // double precision; and the time and iterations to reach equilibrium for a 10 mm indentation of

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-3.0-or-later
 # Threads on a shared machine: bench_tled's explicit steps (74×18×54 block, double) and tangent
 # assembly (24×18×18) on 1 and 2 threads, on a quiet machine and beside a competing CPU-bound
 # process: the thread governor off (PHYSREG_THREAD_GOVERNOR=off) with libgomp's default waiting,

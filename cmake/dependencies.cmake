@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
 # Every dependency comes from a Debian 12 package (see scripts/install-deps.sh); nothing is
 # downloaded at configure time.
 find_package(Eigen3 3.4 REQUIRED NO_MODULE)
@@ -37,3 +38,17 @@ find_package(MPI REQUIRED COMPONENTS C)
 add_library(physreg_hypre INTERFACE)
 target_include_directories(physreg_hypre SYSTEM INTERFACE ${HYPRE_INCLUDE_DIR})
 target_link_libraries(physreg_hypre INTERFACE ${HYPRE_LIBRARY} MPI::MPI_C)
+
+# The Python module: Debian's interpreter (matching python3-dev and pybind11-dev), not whichever
+# python3 comes first on PATH. Not in sanitizer builds (an instrumented module needs an
+# instrumented interpreter or LD_PRELOAD tricks).
+if(PHYSREG_SANITIZE)
+  set(PHYSREG_BUILD_PYTHON OFF)
+endif()
+if(PHYSREG_BUILD_PYTHON)
+  if(NOT DEFINED Python3_EXECUTABLE AND EXISTS /usr/bin/python3)
+    set(Python3_EXECUTABLE /usr/bin/python3)
+  endif()
+  find_package(Python3 3.9 REQUIRED COMPONENTS Interpreter Development.Module)
+  find_package(pybind11 2.10 CONFIG REQUIRED)
+endif()

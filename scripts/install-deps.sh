@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-3.0-or-later
 # Installs the Debian 12 packages physreg needs, if any is missing. Idempotent and quiet.
 # As root it installs them; otherwise it prints the exact apt-get line and stops.
 set -euo pipefail
@@ -20,7 +21,10 @@ packages=(
   liblbfgs-dev             # L-BFGS (Nocedal; MIT): paper 002's moduli and boundary-force estimation
   libopenmpi-dev openmpi-bin # enrichment database builds across processes (mpirun)
   zlib1g-dev               # compressed VTU arrays
-  python3-matplotlib       # plots of the studies (scripts/study_surface.py)
+  python3-matplotlib       # plots of the studies (scripts/study_surface.py) and of the HTML reports
+  pybind11-dev python3-dev # the Python module (import physreg)
+  python3-numpy python3-pytest # the Python module's arrays and its tests
+  chromium                 # tests: report.html loads in a headless browser without console errors
   libgtest-dev libgmock-dev libbenchmark-dev
   calculix-ccx             # tests: an independent nonlinear FE solver to compare Newton with (optional at run time)
 )

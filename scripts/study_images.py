@@ -1,4 +1,5 @@
 #!/usr/bin/python3
+# SPDX-License-Identifier: GPL-3.0-or-later
 # The study of paper 002 on physreg's phantom: segmentation-driven registration of the pre-operative
 # (rest) image to the deformed (insufflated) image of the organs, with per-structure Young's moduli
 # and the boundary load estimated by L-BFGS, against ITK's rigid, Demons and B-spline registration on

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-3.0-or-later
 # The honest phantom's study over seeds (issue 17): for each seed, `physreg demo` makes a phantom
 # whose ground-truth moduli, mesh and noise come from that seed, estimates on A, B, C, registers A–E
 # and writes summary.json; this script collects the TRE of every method (training and held-out)

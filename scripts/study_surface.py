@@ -1,4 +1,5 @@
 #!/usr/bin/python3
+# SPDX-License-Identifier: GPL-3.0-or-later
 # The study of paper 001 on physreg's phantom: registration of the liver model to partial
 # intra-operative surfaces of the insufflated liver (healthy and cirrhotic materials, two seeds
 # each, plus one real liver from ../shared/data when present), visible fractions 50 … 10 %,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "cli_support.hpp"
 
 #include <sstream>
@@ -5,7 +6,10 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 
+#include <cstdlib>
+#include <optional>
 #include <iostream>
+#include <sys/wait.h>
 
 namespace physreg::cli {
 
@@ -105,6 +109,61 @@ std::vector<double> parse_number_list(const std::string& text, const std::string
     }
     if (v.empty()) fail("{}: empty list", option);
     return v;
+}
+
+namespace {
+
+bool g_reports = true;
+
+std::string shell_quote(const std::string& text)
+{
+    std::string out = "'";
+    for (char c : text) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return out + "'";
+}
+
+/// Where the Python package lives: $PHYSREG_PYTHONPATH (the package sets it when it runs a command
+/// in-process), else next to the program — the build tree (bin/../python) or an install
+/// (bin/../lib/python3/dist-packages).
+std::optional<std::filesystem::path> python_package_root()
+{
+    namespace fs = std::filesystem;
+    std::vector<fs::path> candidates;
+    if (const char* env = std::getenv("PHYSREG_PYTHONPATH"); env && *env) candidates.emplace_back(env);
+    std::error_code ec;
+    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+    if (!ec) {
+        candidates.push_back(exe.parent_path().parent_path() / "python");
+        candidates.push_back(exe.parent_path().parent_path() / "lib" / "python3" / "dist-packages");
+    }
+    for (const auto& c : candidates)
+        if (fs::exists(c / "physreg" / "report.py", ec)) return c;
+    return std::nullopt;
+}
+
+} // namespace
+
+void set_html_reports(bool enabled) { g_reports = enabled; }
+
+void write_html_report(const std::filesystem::path& folder, const std::filesystem::path& shown_as)
+{
+    if (!g_reports) return;
+    const auto root = python_package_root();
+    if (!root) {
+        logger()->warn("report.html not written: the physreg Python package (physreg/report.py) was not found next to the program "
+                       "(build with -DPHYSREG_BUILD_PYTHON=ON, or set PHYSREG_PYTHONPATH); --no-report silences this");
+        return;
+    }
+    const std::string python = std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
+    const std::string command = "PYTHONPATH=" + shell_quote(root->string()) + " OMP_NUM_THREADS=1 " + python + " -m physreg.report " +
+                                shell_quote(folder.string()) +
+                                (shown_as.empty() ? std::string() : " --shown-as " + shell_quote(std::filesystem::absolute(shown_as).string())) + " >/dev/null";
+    const int status = std::system(command.c_str());
+    if (status != 0) {
+        const int code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+        logger()->warn("report.html not written: '{} -m physreg.report' failed (exit status {}; its message is above; is python3-matplotlib "
+                       "installed?); the other outputs are complete", python, code);
+    }
 }
 
 } // namespace physreg::cli

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Shared pieces of the physreg subcommands: JSON summaries, option checks, output paths.
 #include <CLI/CLI.hpp>
@@ -47,6 +48,13 @@ TissueTable load_tissues(const std::string& path);
 
 /// "1,2.5,3" → numbers; Error naming `option` for an empty list or an item that is not a number.
 std::vector<double> parse_number_list(const std::string& text, const std::string& option);
+/// report.html in `folder` (`shown_as`: the final folder when `folder` is a staging one; it holds the command's summary.json), drawn by the Python package's
+/// physreg.report with matplotlib. A missing Python or matplotlib, or a failing script, is a
+/// warning naming the reason: the registration's own outputs are complete without it.
+void write_html_report(const std::filesystem::path& folder, const std::filesystem::path& shown_as = {});
+/// --no-report: commands skip report.html.
+void set_html_reports(bool enabled);
+
 /// Fails unless the output's directory exists (checked before any work is done).
 void check_output_path(const std::filesystem::path& path, const std::string& option);
 

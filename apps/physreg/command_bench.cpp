@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg bench enrich: time per update (new tool position → every fine node at equilibrium) of the
 // high-resolution model and of the coarse-to-fine scheme, for compressions followed as sequences
 // of tool positions, each update warm-started from the previous one; TRE at the final depth.

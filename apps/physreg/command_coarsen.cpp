@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg coarsen: a grid mesh re-gridded by the majority rule, with every fine node embedded in a
 // coarse element (paper 000's coarse-to-fine model).
 #include "cli_support.hpp"

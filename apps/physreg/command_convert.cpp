@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg convert: between the formats physreg reads and writes, by extension.
 #include "cli_support.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg demo: the main job. On the built-in CIRS-057A-like phantom it runs paper 000 end to end:
 // phantom dataset (the body ground truth) → coupling estimation (train A, B, C) → detail enrichment
 // database (training positions only) → registration of the training and the held-out compressions
@@ -424,6 +425,7 @@ void add_subcommand_demo(CLI::App& app)
                         {"seconds", {{"phantom", phantom_s}, {"phantom_reused", reuse}, {"estimation", estimate_s}, {"database", database_s},
                                      {"registration", registration_s}, {"total", total_s}}}};
         write_atomically(dir / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
+        write_html_report(dir);
         if (o->json) std::cout << summary.dump(2) << std::endl;
         else std::cout << text;
     });

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg enrich build / apply: paper 000's coarse-to-fine scheme — the detail enrichment
 // database (threads and MPI ranks), and coarse simulation + synthesis of the fine mesh.
 #include "cli_support.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg info: what a file holds (image geometry and labels, mesh counts and quality, surfaces,
 // landmarks, tissue tables).
 #include "cli_support.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg landmarks locate: where each landmark sits in a mesh, and a nodal field interpolated there.
 #include "cli_support.hpp"
 

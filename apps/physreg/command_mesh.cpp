@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg mesh: label volume → uniform hexahedral mesh (paper 000), plus optional surfaces and
 // tetrahedra.
 #include "cli_support.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg phantom: the experiment dataset (built-in CIRS-057A-like phantom or any label map) that
 // every registration command reads.
 #include "cli_support.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg register-images: paper 002 — a moving image registered to a fixed (reference) image by a
 // linear-elastic simulation whose boundary load and Young's moduli are estimated from the two
 // segmentations, with ITK's rigid, Demons and B-spline registrations (on intensities and on
@@ -478,6 +479,8 @@ void add_subcommand_register_images_impl(CLI::App& app)
         summary["methods"] = methods;
         summary["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         write_atomically(staging.path() / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
+        bar.update(0.99, "report.html");
+        write_html_report(staging.path(), o->output);
         staging.commit();
         bar.finish();
         if (o->json) {

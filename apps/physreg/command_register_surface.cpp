@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg register-surface: paper 001 — a tetrahedral liver model registered to a partial
 // intra-operative surface (labelled point cloud), with rigid and ICP baselines in the same report.
 #include "cli_support.hpp"
@@ -430,6 +431,8 @@ void add_subcommand_register_surface(CLI::App& app)
         summary["methods"] = methods;
         summary["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         write_atomically(staging.path() / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
+        bar.update(0.99, "report.html");
+        write_html_report(staging.path(), o->output);
         staging.commit();
         bar.finish();
         const auto line = [&](const std::string& name) {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg estimate / register-compression / evaluate: paper 000's heterogeneous model — fit its
 // parameters on training compressions, predict a compression, and measure TRE.
 #include "cli_support.hpp"
@@ -170,7 +171,12 @@ void add_subcommand_register_compression(CLI::App& app)
                         {"tre_against_dataset", json::parse(tre_stats_json(tre))},
                         {"files", {{"mesh", "mesh.vtu"}, {"landmarks", "landmarks.csv"}, {"displacement", "displacement.nii.gz"}}},
                         {"units", "mm, LPS; displacement field in the rest (pre-operative) space: x → x + u(x)"}};
+        summary["command"] = "register-compression";
+        summary["inputs"] = {{"dataset", fs::absolute(o->dataset).string()}, {"state", o->state}, {"parameters", o->parameters}};
+        summary["tre_per_landmark"] = json::parse(tre_report_json(tre))["landmarks"];
         write_atomically(staging.path() / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
+        bar.update(0.95, "report.html");
+        write_html_report(staging.path(), o->output);
         staging.commit();
         bar.finish();
         std::cerr << fmt::format("register-compression {} ({}): {} iterations, {:.2f} s, max displacement {:.2f} mm; TRE {}\n", o->state,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // physreg simulate CASE.yaml: TLED simulation of a mesh or label volume under constraints,
 // forces and indenters; writes VTU frames, a ParaView collection, the final displacement field
 // (VTU and ITK image) and a JSON summary. Outputs appear only when the run succeeds.
@@ -142,14 +143,16 @@ nlohmann::json write_simulation_outputs(const SimulationCase& c, const Simulatio
 void add_subcommand_simulate(CLI::App& app)
 {
     struct Options : CommonOptions {
-        std::string case_file;
+        std::string case_file, output;
     };
     auto o = std::make_shared<Options>();
     auto* sub = app.add_subcommand("simulate", "Run a TLED simulation described by a case file (YAML)");
     sub->add_option("case", o->case_file, "Case file (see docs/simulate.md)")->required();
+    sub->add_option("-o,--output", o->output, "Output directory (instead of the case file's `output`)");
     sub->add_flag("--json", o->json, "Print the JSON summary on stdout");
     sub->callback([o] {
-        const SimulationCase c = read_simulation_case(o->case_file);
+        SimulationCase c = read_simulation_case(o->case_file);
+        if (!o->output.empty()) c.output_directory = o->output;
         ProgressDisplay bar("simulate");
         const SimulationResult result = run_simulation(c, [&](double f, const std::string& m) { bar.update(f, m); });
         bar.finish();

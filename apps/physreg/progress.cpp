@@ -1,15 +1,31 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "progress.hpp"
 
 #include "physreg/core/log.hpp"
 
 #include <algorithm>
 #include <cstdio>
+#include <thread>
 #include <unistd.h>
 
 namespace physreg::cli {
 
+namespace {
+ProgressSink g_sink;
+std::thread::id g_sink_thread;
+bool g_quiet = false;
+} // namespace
+
+void set_progress_sink(ProgressSink sink)
+{
+    g_sink = std::move(sink);
+    g_sink_thread = std::this_thread::get_id();
+}
+
+void set_progress_quiet(bool quiet) { g_quiet = quiet; }
+
 ProgressDisplay::ProgressDisplay(std::string label)
-    : m_label(std::move(label)), m_terminal(isatty(fileno(stderr)) != 0), m_start(std::chrono::steady_clock::now()), m_last_draw(m_start)
+    : m_label(std::move(label)), m_terminal(!g_quiet && !g_sink && isatty(fileno(stderr)) != 0), m_start(std::chrono::steady_clock::now()), m_last_draw(m_start)
 {
 }
 
@@ -21,6 +37,11 @@ ProgressDisplay::~ProgressDisplay()
 void ProgressDisplay::update(double fraction, const std::string& message)
 {
     fraction = std::clamp(fraction, 0.0, 1.0);
+    if (g_sink) {
+        if (std::this_thread::get_id() == g_sink_thread) g_sink(m_label, fraction, message);
+        return;
+    }
+    if (g_quiet) return;
     const auto now = std::chrono::steady_clock::now();
     const double elapsed = std::chrono::duration<double>(now - m_start).count();
     const double eta = fraction > 0 ? elapsed * (1 - fraction) / fraction : 0.0;

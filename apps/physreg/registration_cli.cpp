@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Options and helpers shared by the commands that build the liver model.
 #include "registration_cli.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Options and helpers shared by the commands that build the liver model (estimate,
 // register-compression, enrich).

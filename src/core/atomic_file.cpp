@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/core/atomic_file.hpp"
 
 #include "physreg/core/error.hpp"

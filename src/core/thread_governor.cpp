@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/core/thread_governor.hpp"
 
 #include "physreg/core/log.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Dice and boundary distances of warped segmentations.
 #include "physreg/evaluation/segmentation_overlap.hpp"
 

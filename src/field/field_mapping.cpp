@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Dense displacement fields applied to points and images.
 #include "physreg/field/field_mapping.hpp"
 

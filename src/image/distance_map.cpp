@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Signed distance maps with ITK's exact (Maurer) Euclidean distance transform.
 #include "physreg/image/distance_map.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/io/gmsh.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -257,6 +258,7 @@ void read_v4(Tokens& t, std::unordered_map<std::int64_t, Vec3>& nodes, std::vect
 VolumeMesh read_gmsh(const fs::path& path)
 {
     const std::string what = "Gmsh '" + path.string() + "'";
+    require_existing_file(path, what);
     std::ifstream in(path, std::ios::binary);
     if (!in) fail("{}: cannot open file", what);
     Tokens t{in, what};

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/io/image_io.hpp"
 
 #include "detail/itk_bridge.hpp"

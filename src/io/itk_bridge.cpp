@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "detail/itk_bridge.hpp"
 
 #include "physreg/core/error.hpp"
@@ -42,7 +43,7 @@ void require_exists(const std::string& path)
 {
     register_image_formats();
     std::error_code ec;
-    if (!fs::exists(path, ec)) fail("image '{}': file does not exist", path);
+    if (!fs::exists(path, ec)) fail_missing_file("image '{}': file does not exist", path);
 }
 
 template <typename ImageType>
@@ -255,7 +256,7 @@ void itk_write_rgb_png(const std::string& path, const std::string& final_name, i
 
 void itk_read_rgb_png(const std::string& path, int& width, int& height, std::vector<std::uint8_t>& rgb)
 {
-    if (!fs::exists(path)) fail("PNG '{}': file does not exist", path);
+    if (!fs::exists(path)) fail_missing_file("PNG '{}': file does not exist", path);
     try {
         auto reader = itk::ImageFileReader<RgbImage2>::New();
         reader->SetImageIO(itk::PNGImageIO::New());

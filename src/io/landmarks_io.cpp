@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/io/landmarks_io.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -239,6 +240,7 @@ LandmarkSet read_mrk_json(std::istream& in, const std::string& what)
 LandmarkSet read_landmarks(const fs::path& path)
 {
     const std::string what = "landmarks '" + path.string() + "'";
+    require_existing_file(path, what);
     std::ifstream in(path);
     if (!in) fail("{}: cannot open file", what);
     const std::string ext = full_extension(path);

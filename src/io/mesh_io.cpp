@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/io/mesh_io.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -15,7 +16,7 @@ bool is_volume_mesh_file(const fs::path& path)
 
 VolumeMesh read_volume_mesh(const fs::path& path, MeshData* data)
 {
-    if (!fs::exists(path)) fail("mesh '{}': file does not exist", path.string());
+    if (!fs::exists(path)) fail_missing_file("mesh '{}': file does not exist", path.string());
     const auto ext = full_extension(path);
     if (ext == ".vtu") return read_vtu(path, data);
     if (ext == ".msh") {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/io/surface_io.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -306,6 +307,7 @@ void write_obj(std::ofstream& out, const SurfaceMesh& mesh)
 // LINES skipped, CELL_DATA / POINT_DATA scalars (labels) and point NORMALS.
 SurfaceMesh read_vtk_polydata(const fs::path& path, const std::string& what)
 {
+    require_existing_file(path, what);
     std::ifstream in(path);
     if (!in) fail("{}: cannot open file", what);
     std::string line;
@@ -439,7 +441,7 @@ void write_vtk_polydata(std::ofstream& out, const SurfaceMesh& mesh)
 SurfaceMesh read_point_set(const fs::path& path)
 {
     const std::string what = "point set '" + path.string() + "'";
-    if (!fs::exists(path)) fail("{}: file does not exist", what);
+    if (!fs::exists(path)) fail_missing_file("{}: file does not exist", what);
     const std::string ext = full_extension(path);
     if (ext != ".ply" && ext != ".vtk") fail("{}: point sets are read from PLY or legacy VTK files", what);
     SurfaceMesh mesh = ext == ".ply" ? read_ply(path, what) : read_vtk_polydata(path, what);
@@ -451,7 +453,7 @@ SurfaceMesh read_point_set(const fs::path& path)
 SurfaceMesh read_surface(const fs::path& path)
 {
     const std::string what = "surface '" + path.string() + "'";
-    if (!fs::exists(path)) fail("{}: file does not exist", what);
+    if (!fs::exists(path)) fail_missing_file("{}: file does not exist", what);
     const std::string ext = full_extension(path);
     SurfaceMesh mesh;
     if (ext == ".stl") mesh = read_stl(path, what);

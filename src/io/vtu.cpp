@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/io/vtu.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -282,6 +283,7 @@ void write_vtu(const fs::path& path, const VolumeMesh& mesh, const MeshData& dat
 VolumeMesh read_vtu(const fs::path& path, MeshData* data)
 {
     const std::string what = "VTU '" + path.string() + "'";
+    require_existing_file(path, what);
     std::ifstream in(path, std::ios::binary);
     if (!in) fail("{}: cannot open file", what);
     std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

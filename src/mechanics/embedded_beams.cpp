@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/mechanics/embedded_beams.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -43,6 +44,7 @@ std::vector<VesselBranch> read_vessel_centrelines(const std::filesystem::path& p
     const std::string what = "vessel centrelines '" + path.string() + "'";
     if (!(scale > 0 && std::isfinite(scale))) fail("{}: scale {} must be > 0", what, scale);
     if (!(default_radius_mm > 0)) fail("{}: default radius {} mm must be > 0", what, default_radius_mm);
+    require_existing_file(path, what);
     std::ifstream in(path);
     if (!in) fail("{}: cannot open file", what);
     std::vector<VesselBranch> branches;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Linear elasticity with per-structure moduli (paper 002's K(E) u = F).
 #include "physreg/mechanics/linear_elasticity.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/mechanics/node_selection.hpp"
 
 #include "physreg/core/error.hpp"

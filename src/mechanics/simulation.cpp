@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/mechanics/simulation.hpp"
 
 #include "physreg/core/error.hpp"
@@ -96,7 +97,7 @@ fs::path resolve(const fs::path& base, const std::string& file)
 SimulationCase read_simulation_case(const fs::path& path)
 {
     const Reader r{"case '" + path.string() + "'"};
-    if (!fs::exists(path)) fail("{}: file does not exist", r.what);
+    if (!fs::exists(path)) fail_missing_file("{}: file does not exist", r.what);
     YAML::Node root;
     try {
         root = YAML::LoadFile(path.string());

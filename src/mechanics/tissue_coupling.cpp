@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/mechanics/tissue_coupling.hpp"
 
 #include "physreg/core/error.hpp"

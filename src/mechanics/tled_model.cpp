@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/mechanics/tled_model.hpp"
 
 #include "physreg/core/error.hpp"

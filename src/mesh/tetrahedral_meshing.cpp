@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/mesh/tetrahedral_meshing.hpp"
 
 #include "physreg/core/error.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // CGAL's AABB tree over triangles (header-only, GPL-3.0-or-later), compiled in the CGAL object library.
 #include "physreg/mesh/triangle_search.hpp"
 

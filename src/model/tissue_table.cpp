@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/model/tissue_table.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -43,7 +44,7 @@ void TissueTable::validate(const std::string& what) const
 TissueTable read_tissue_table(const std::filesystem::path& path)
 {
     const std::string what = "tissue table '" + path.string() + "'";
-    if (!std::filesystem::exists(path)) fail("{}: file does not exist", what);
+    if (!std::filesystem::exists(path)) fail_missing_file("{}: file does not exist", what);
     YAML::Node root;
     try {
         root = YAML::LoadFile(path.string());

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/phantom/abdominal_phantom.hpp"
 
 #include "physreg/core/error.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/phantom/dataset.hpp"
 
 #include <omp.h>
@@ -916,7 +917,7 @@ PhantomDataset read_phantom_dataset(const fs::path& directory)
     }
     if (d.states.empty() || d.states.front().name != "rest") fail("dataset manifest '{}': the first state must be 'rest'", path.string());
     auto check = [&](const std::string& relative) {
-        if (!fs::exists(directory / relative)) fail("dataset '{}': listed file '{}' does not exist", directory.string(), relative);
+        if (!fs::exists(directory / relative)) fail_missing_file("dataset '{}': listed file '{}' does not exist", directory.string(), relative);
     };
     check(d.tissues_file);
     for (const auto& s : d.states) {

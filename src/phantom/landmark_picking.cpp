@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/phantom/landmark_picking.hpp"
 
 #include "physreg/core/error.hpp"

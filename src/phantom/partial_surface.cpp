@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/phantom/partial_surface.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -172,6 +173,7 @@ void write_point_cloud_csv(const std::filesystem::path& path, const LabelledPoin
 
 LabelledPointCloud read_point_cloud_csv(const std::filesystem::path& path)
 {
+    require_existing_file(path, "point cloud '" + path.string() + "'");
     std::ifstream in(path);
     if (!in) fail("point cloud '{}': cannot open file", path.string());
     LabelledPointCloud cloud;

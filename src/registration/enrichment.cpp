@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/registration/enrichment.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -175,6 +176,7 @@ void write_enrichment_database(const std::filesystem::path& path, const Enrichme
 
 EnrichmentDatabase read_enrichment_database(const std::filesystem::path& path)
 {
+    require_existing_file(path, "enrichment database '" + path.string() + "'");
     std::ifstream in(path, std::ios::binary);
     if (!in) fail("enrichment database '{}': cannot open", path.string());
     const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

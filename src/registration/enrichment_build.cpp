@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Building the detail enrichment database: the fine and coarse models deformed under every
 // condition of a plan, sequences in parallel, depths warm-started, checkpoints for resuming.
 #include "physreg/registration/enrichment.hpp"

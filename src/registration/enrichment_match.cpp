@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Run-time side of the detail enrichment: which stored conditions fit a new deformation.
 #include "physreg/registration/enrichment.hpp"
 

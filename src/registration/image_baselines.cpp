@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Paper 002's baselines: validation and conversion around the ITK translation unit.
 #include "physreg/registration/image_baselines.hpp"
 

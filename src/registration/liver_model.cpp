@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/registration/liver_model.hpp"
 
 #include "physreg/core/atomic_file.hpp"
@@ -79,6 +80,7 @@ void write_model_parameters(const std::filesystem::path& path, const ModelParame
 
 ModelParameters read_model_parameters(const std::filesystem::path& path, std::string* fingerprint)
 {
+    require_existing_file(path, "parameter file '" + path.string() + "'");
     std::ifstream in(path);
     if (!in) fail("parameter file '{}': cannot open", path.string());
     json j;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Paper 002's estimation of boundary forces and Young's moduli (adjoint gradients, L-BFGS).
 #include "physreg/registration/segmentation_registration.hpp"
 

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-3.0-or-later
 # End-to-end checks of the physreg program: outputs, exit codes, messages, no partial files.
 set -u
 physreg="$1"

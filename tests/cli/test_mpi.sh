@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-3.0-or-later
 # An enrichment database built by 2 MPI ranks (mpirun) is byte-identical to the 1-process build.
 set -eu
 physreg="$1"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Helpers shared by the unit tests: temporary directories, synthetic label volumes, shared data.
 #include "physreg/image/image_geometry.hpp"

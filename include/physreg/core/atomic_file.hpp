@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Outputs are written to a temporary file beside the target and renamed into place only when
 // complete, so a failure never leaves a partial or corrupted output behind.

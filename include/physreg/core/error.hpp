@@ -1,5 +1,7 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Errors: bad input throws physreg::Error naming the item, the value and the reason.
+#include <filesystem>
 #include <fmt/format.h>
 #include <stdexcept>
 #include <string>
@@ -11,12 +13,28 @@ public:
     using std::runtime_error::runtime_error;
 };
 
+/// An input file or directory that is not there (Python sees FileNotFoundError).
+class MissingFileError : public Error {
+public:
+    using Error::Error;
+};
+
 // Throws Error with a fmt-formatted message.
 template <typename... Args>
 [[noreturn]] void fail(fmt::format_string<Args...> format, Args&&... args)
 {
     throw Error(fmt::format(format, std::forward<Args>(args)...));
 }
+
+/// Throws MissingFileError with a fmt-formatted message.
+template <typename... Args>
+[[noreturn]] void fail_missing_file(fmt::format_string<Args...> format, Args&&... args)
+{
+    throw MissingFileError(fmt::format(format, std::forward<Args>(args)...));
+}
+
+/// Throws MissingFileError "<what>: file does not exist" unless `path` exists.
+void require_existing_file(const std::filesystem::path& path, const std::string& what);
 
 } // namespace physreg
 

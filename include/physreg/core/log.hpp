@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The library never prints: it logs through a replaceable spdlog logger (stderr by default).
 #include <memory>

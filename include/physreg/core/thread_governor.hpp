@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Chooses the OpenMP team size of a repeated parallel workload by measuring it.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Shared numeric types. Positions are physical coordinates in mm, ITK's LPS space.
 #include <Eigen/Core>

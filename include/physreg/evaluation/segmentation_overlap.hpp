@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // How well a warped segmentation matches the reference, per structure: Dice and the symmetric
 // surface distance between the two boundaries (mm).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Sampled surface distances (paper 001's Hausdorff distance): from every sample of one surface —
 // its vertices and triangle centroids — to the closest point of the other surface (exact

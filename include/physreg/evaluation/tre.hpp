@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Target registration error: distances (mm) between predicted and ground-truth landmarks matched
 // by name, summarised over all landmarks, surface ones and internal ones (tumour + vessel), and

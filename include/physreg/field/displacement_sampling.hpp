@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // From nodal displacements to a dense displacement-field image usable in ITK, 3D Slicer and ANTs.
 #include "physreg/image/image_geometry.hpp"

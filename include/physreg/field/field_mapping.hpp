@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Using a dense displacement field d on a fixed grid (x ↦ x + d(x), ITK's convention for
 // resampling): trilinear sampling, point inversion, resampling label maps and images through it.

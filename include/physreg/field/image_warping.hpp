@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // From a deformed mesh to deformed images: the inverse map x ↦ X(x) (deformed → rest) sampled on
 // an image grid, and label / intensity images resampled through it — what an image of the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // A small raster canvas for the figures physreg writes (slices, charts): pixels, lines, markers
 // and a 5×7 bitmap font. Hand-written: the Debian plotting libraries (e.g. VTK, Cairo) are heavy

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Orthogonal slices of an image with tissue contours and landmarks overlaid (true: green crosses,
 // predicted: red circles joined to their true position), so a person can check a state at a glance.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Signed distance maps of label regions (mm; negative inside, positive outside), with the
 // trilinear interpolant and its exact gradient at any physical point — the data term of

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Geometry of a 3-D image as ITK defines it: physical = origin + direction * diag(spacing) * index,
 // in mm and LPS. Index (0,0,0) is the centre of the first voxel.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Gmsh .msh meshes made elsewhere (e.g. SOFA's liver): versions 1, 2.x (ascii and binary) and
 // 4.1 (ascii and binary). Tetrahedra (type 4) and hexahedra (type 5) are kept; points, lines and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Landmark files, chosen by extension:
 //  .csv      name,x,y,z[,type] in mm LPS. An optional "# coordinate_system = RAS" comment line

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Volume meshes by extension: .vtu (VTK XML) and .msh (Gmsh; written as 4.1, or 2.2 for
 // "*.v2.msh").

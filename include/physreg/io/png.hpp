@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // 8-bit RGB PNG pictures (through ITK's PNG IO): the figures people look at.
 #include <cstdint>

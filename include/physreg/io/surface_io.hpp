@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Triangulated surfaces: STL (binary written; ascii or binary read), PLY (binary little-endian
 // written with per-face labels "inside_label"/"outside_label"; ascii or binary read) and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // VTK XML unstructured grid (.vtu), the format ParaView, VTK and meshio open. Written as inline
 // base64 "binary" arrays with UInt64 headers; read from ascii, binary (raw or zlib-compressed),

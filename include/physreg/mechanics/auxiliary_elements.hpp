@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Elements that act on a model's own nodes besides its volume elements — paper 001's capsule
 // membrane and embedded vessel beams. The implicit integrator adds their forces and (rotated)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Implicit (backward Euler) dynamics of a TLED model, for paper 001's registration and for
 // simulations whose time steps are far above the explicit critical step.

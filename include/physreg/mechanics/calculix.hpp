@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // A bridge to CalculiX (ccx, Debian calculix-ccx), the independent nonlinear FE solver physreg checks
 // its own implicit solver against: the same nodes, elements, tissues and law, prescribed nodal

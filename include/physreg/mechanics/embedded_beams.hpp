@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Paper 001's vascular tree: Timoshenko beams along the vessel centrelines, embedded in the
 // tetrahedra. Each beam node lies in a tetrahedron; its displacement is the barycentric mix of

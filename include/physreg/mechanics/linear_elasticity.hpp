@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Small-strain linear elasticity on linear tetrahedra with one Young's modulus per structure
 // (label): K(E) u = F, K(E) = Σ_j E_j K̂_j + k_a I, where K̂_j is the stiffness of structure j's

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Linear solvers for the symmetric positive definite systems of implicit mechanics (K Δu = −r).
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Loads and constraints of a TLED simulation: constrained node sets (fixed or prescribed
 // displacement), rigid indenters pressing through frictionless contact, and nodal forces.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Hyperelastic material laws of the TLED solver, evaluated at one deformation gradient F.
 //

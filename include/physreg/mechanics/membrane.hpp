@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Glisson's capsule (paper 001's heterogeneous liver): a membrane of constant-strain triangles on
 // the model's surface nodes, plane stress, co-rotational. Per triangle, the in-plane deformation

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Moving-least-squares (MLS) shape functions with a linear basis (Lancaster & Salkauskas 1981;
 // paper 000 eq. 1): a point x is expressed from the nodes of its support domain as

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Static equilibrium by Newton's method on the assembled tangent: the implicit counterpart of
 // dynamic relaxation (tled_solver.hpp), for the same model, loads and coupling, with the same

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Choosing the nodes a load or constraint acts on, in physical terms.
 #include "physreg/mesh/volume_mesh.hpp"

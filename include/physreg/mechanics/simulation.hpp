@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // A simulation case (what `physreg simulate CASE.yaml` runs): the model, loads, solver settings
 // and outputs, read from YAML; and the run itself.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // One interface over the two static solvers, so that pipelines (compression prediction, tracking,
 // the enrichment database) choose by option: dynamic relaxation (explicit TLED iterations) or

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The assembled tangent stiffness of a TLED model, for implicit (Newton, backward Euler) solvers.
 //

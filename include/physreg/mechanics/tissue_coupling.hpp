@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Tissue–tissue penalty coupling through moving least squares (paper 000 eqs. 1–5).
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Everything TLED precomputes in the reference configuration (Miller, Joldes, Lance, Wittek 2007):
 // shape-function derivatives, volumes, hourglass vectors, lumped masses, per-element materials,

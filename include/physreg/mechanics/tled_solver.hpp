@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Total Lagrangian Explicit Dynamics: central differences with lumped mass and mass-proportional
 // damping (paper 000 eq. 8), and dynamic relaxation to static equilibrium (adaptive damping from

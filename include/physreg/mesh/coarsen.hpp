@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Paper 000's coarse model: a grid mesh re-gridded with the majority rule (e.g. 74×18×54 →
 // 24×18×18), and every fine node embedded in the coarse element that contains it.

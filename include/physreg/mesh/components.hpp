@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Connected pieces of a mesh. Cells count as connected only through a shared face: pieces that
 // touch only along an edge or at a vertex would hinge or pivot there in a finite-element model,

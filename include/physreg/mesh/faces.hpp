@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Cell faces of a volume mesh matched across neighbours (by sorted node ids): the basis of
 // surface extraction, connectivity analysis and conformity checks on unstructured meshes.

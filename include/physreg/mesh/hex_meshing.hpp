@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Paper 000, "Hexahedral mesh construction": a uniform hexahedral mesh straight from a label
 // volume, one hexahedron per voxel or on a target grid over the tissues' bounding box.

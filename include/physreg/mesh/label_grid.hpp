@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // A label per cell of a uniform grid: the common currency of meshing and coarsening. A label
 // volume is one (voxels are cells), a grid hexahedral mesh is one (its cells), and the majority

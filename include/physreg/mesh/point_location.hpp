@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Locating points (landmarks) in a volume mesh and interpolating nodal fields there.
 #include "physreg/core/landmark.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Triangulated surfaces: the outer boundary and tissue interfaces of a volume mesh, or a surface
 // read from STL/PLY/OBJ. Each triangle carries the label of the tissue on each side.

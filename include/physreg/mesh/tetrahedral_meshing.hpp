@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Conforming tetrahedral meshes of label volumes with CGAL's Mesh_3 (Delaunay refinement): every
 // boundary between two labels is a set of mesh faces, approximating the smooth interface rather

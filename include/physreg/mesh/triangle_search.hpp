@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Closest points on a set of triangles (CGAL's AABB tree): paper 001's matching of a point cloud
 // to the model's surface, transfer of surface labels, and sampled surface distances (Hausdorff).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The volumetric mesh every solver consumes: nodes in physical mm (LPS), one cell type per mesh,
 // one tissue label per cell. Hexahedra follow VTK's node order (0-3 bottom face counter-clockwise

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The label → tissue table: which label-volume values are which tissue, and its material.
 // Units: Young's modulus in Pa, density in kg/m³, Poisson's ratio dimensionless.

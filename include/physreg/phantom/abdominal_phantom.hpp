@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The built-in CIRS-057A-like abdominal phantom (paper 000's test object), and what turns any
 // label map into an experiment: which labels are which organ, and an MR-like intensity image.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // `physreg phantom`: an experiment dataset built from the built-in CIRS-057A-like phantom or any
 // label map — the shared test bed of every registration method in physreg. From the rest labels it

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The phantom's ground-truth model: deliberately *not* the family of models physreg registers with
 // (uniform one-point hexahedra, Neo-Hookean, ν 0.49, liver only, TLED relaxation), so that

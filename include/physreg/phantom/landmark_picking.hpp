@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Paper 000's 25 landmarks, picked automatically from a label map so that any segmentation gets
 // them: 11 on the liver surface at recognisable points (tips, ridges and a notch, found as

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Paper 001's intra-operative data: the part of the deformed liver surface a laparoscopic camera
 // sees, as a noisy point cloud whose points carry anatomical feature labels (an umbilical-notch-

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // A built-in synthetic liver label volume, so the main job needs no download: smooth lobed
 // parenchyma (label 1) ≈ 184 × 142 × 89 mm, a branching vessel tree (label 2) and four spherical

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Paper 000's detail enrichment (eqs. 9–10): the fine (high-resolution) model's nodes expressed
 // from the 8 nodes of the coarse element they lie in, per deformation condition, so that a coarse

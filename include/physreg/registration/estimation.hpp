@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Paper 000 eqs. 6–7: the model parameters (coupling stiffnesses k_{c,s-t}, k_{c,s-v}, optionally
 // the tumour and vessel Young's moduli) that minimise the mean landmark error over training

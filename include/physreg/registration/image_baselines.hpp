@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The image-registration baselines paper 002 compares with, all from ITK, run on the same pair:
 // - rigid: VersorRigid3DTransform, ImageRegistrationMethodv4, Mattes mutual information

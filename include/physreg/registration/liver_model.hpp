@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The evaluated model of paper 000 and its baselines: the liver (parenchyma, tumours, vessels) of
 // a rest label map meshed on a uniform grid (74 × 54 × 18 cells over the liver by default), TLED

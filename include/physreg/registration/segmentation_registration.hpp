@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Paper 002: segmentation-driven registration whose deformation is always a linear-elastic
 // simulation. The moving image's structures are meshed together (conforming tetrahedra, one

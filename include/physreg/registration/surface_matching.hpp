@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Paper 001's matching and penalty forces: each point of the intra-operative cloud is paired with
 // the closest point of the model's surface triangles that carry the same feature label (umbilical

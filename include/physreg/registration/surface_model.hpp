@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The model paper 001 registers: a smooth tetrahedral liver (CGAL Mesh_3) whose boundary triangles
 // carry surface regions — umbilical notch (UN, 1), anterior margin (AM, 2), the rest (0) — from a

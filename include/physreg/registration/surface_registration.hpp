@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Paper 001: registration of a volumetric liver model to a partial intra-operative surface (a
 // labelled point cloud). The model — co-rotational linear tetrahedra, no Dirichlet condition — is

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Base64 for VTK XML binary arrays (hand-written: a dozen lines, no library in Debian's set fits).
 #include "physreg/core/error.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The narrow door to ITK. This header (and itk_bridge.cpp) use no Eigen: ITK 5.2 bundles its own
 // Eigen 3.3, which must not meet Debian's Eigen 3.4 in one translation unit.

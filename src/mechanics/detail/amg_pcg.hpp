@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Conjugate gradients preconditioned by hypre's BoomerAMG, set up for 3D elasticity (the solver
 // behind LinearSolverKind::pcg_amg). Each call is independent: hypre runs on MPI_COMM_SELF, so

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The hot loop of TLED: forces of a batch of W uniform-strain hexahedra with hourglass control.
 // Elements of a batch sit in SIMD lanes: node values are gathered into lane-major stack arrays,

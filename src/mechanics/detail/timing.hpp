@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Wall-clock seconds for the time splits that the solvers report.
 #include <chrono>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // ITK's rigid, Demons and B-spline registration (paper 002's baselines), behind plain types.
 #include "itk_baselines.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Real third-party data in ../shared/data (skipped when absent): the product never needs it.
 #include "physreg/io/gmsh.hpp"
 #include "physreg/io/image_io.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/core/error.hpp"
 #include "physreg/field/displacement_sampling.hpp"
 #include "physreg/mesh/hex_meshing.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/core/error.hpp"
 #include "physreg/io/landmarks_io.hpp"
 #include "test_support.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/core/error.hpp"
 #include "physreg/io/gmsh.hpp"
 #include "physreg/io/mesh_io.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Blocks and node selections for the mechanics verification tests.
 #include "physreg/mechanics/tled_solver.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Co-rotational tetrahedra and backward Euler dynamics: a cantilever under gravity against
 // Euler–Bernoulli theory, the exact discrete rigid motion of a free body, energy decay under
 // Rayleigh damping, mass matrices, and the errors of bad input.

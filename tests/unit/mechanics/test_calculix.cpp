@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Newton on the TLED discretisation against an independent solver: CalculiX (ccx, Debian
 // calculix-ccx), same mesh, C3D8I (incompatible modes) and C3D8R (reduced integration with
 // CalculiX's own hourglass control) elements, NLGEOM, its Neo-Hookean law (C10 = μ/2, D1 = 2/κ:

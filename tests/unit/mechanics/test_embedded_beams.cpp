@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Paper 001's vessel beams: Timoshenko elements embedded in tetrahedra — the element matrix, rigid
 // motions, a cantilever against Timoshenko's deflection, and the centreline files.
 #include "mechanics_fixtures.hpp"

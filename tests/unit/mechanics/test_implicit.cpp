@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Implicit mechanics: material tangents, the assembled stiffness, contact terms and the Newton
 // solver, checked against finite differences, analytical solutions and dynamic relaxation.
 #include "mechanics_fixtures.hpp"

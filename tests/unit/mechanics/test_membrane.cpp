@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Glisson's capsule membrane (paper 001): constant-strain triangles, co-rotational, plane stress —
 // checked against the energy, rigid motions, finite differences, and the axial stiffness a skin of
 // membrane adds to a block in uniaxial tension.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // The ground truth's law: compressible Mooney–Rivlin. Its stress is the derivative of its energy,
 // its automatic-differentiation tangent the derivative of its stress (finite differences), it
 // reduces to our Neo-Hookean law for C01 = 0, and on a CGAL-meshed gel block with an inclusion

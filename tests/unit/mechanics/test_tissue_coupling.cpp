@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // MLS shape functions and tissue–tissue penalty coupling (paper 000 eqs. 1–5).
 #include "test_support.hpp"
 

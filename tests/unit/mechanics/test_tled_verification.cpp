@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Verification of the TLED solver against analytical solutions and independent runs.
 #include "mechanics_fixtures.hpp"
 #include "physreg/core/error.hpp"

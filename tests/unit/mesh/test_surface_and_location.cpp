@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/core/error.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 #include "physreg/mesh/point_location.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/mesh/faces.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 #include "physreg/mesh/quality.hpp"

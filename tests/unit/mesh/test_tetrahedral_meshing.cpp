@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // CGAL Mesh_3 meshes of label volumes: conforming interfaces, label volumes close to the true
 // shapes (not the voxel staircase), quality figures, determinism per seed, bad input.
 #include "physreg/mesh/faces.hpp"

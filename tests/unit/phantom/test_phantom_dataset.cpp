@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // The phantom dataset (issue 4): files readable by ITK, geometry, landmarks, ground-truth support
 // and contact, determinism, bad input; the ground-truth solver against an analytical answer.
 #include "physreg/core/error.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The `small` phantom with the organs-only ground truth (no gel; the tool presses the liver, depths
 // 6–8 mm from the organ surface, a 12 mm ball): the registration models' own mechanics are tested

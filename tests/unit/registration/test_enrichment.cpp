@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Detail enrichment (paper 000 eqs. 9–10): exact reproduction of a training condition and the
 // database file's round trip and corruption checks.
 #include "organs_only_phantom.hpp"

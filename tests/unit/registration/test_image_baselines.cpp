@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Paper 002's baselines (ITK rigid, Demons, B-spline) on synthetic pairs with a known motion, and
 // the field tools the comparison rests on (sampling, inversion, resampling).
 #include "test_support.hpp"

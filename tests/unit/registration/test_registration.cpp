@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // The liver model variants, compression prediction, TRE and parameter estimation on the small
 // phantom dataset.
 #include "organs_only_phantom.hpp"

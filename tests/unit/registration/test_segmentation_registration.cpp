@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Paper 002's pieces: per-structure linear elasticity, signed distance maps, the adjoint gradient
 // against finite differences, conforming multi-structure meshes, and the F/E alternation.
 #include "test_support.hpp"

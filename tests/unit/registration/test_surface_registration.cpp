@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
 // Paper 001's pieces: closest point on triangles, labelled matching and pruning, the arctan force
 // law, the annealing schedule, force spreading, rigid ICP, the biomechanical registration on an
 // ellipsoid, sampled Hausdorff distances, the surface model and its regions.

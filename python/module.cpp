@@ -1,0 +1,379 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+// physreg's Python module (_physreg; the package `physreg` wraps it). Arrays follow SimpleITK's
+// convention: a volume is a C-contiguous numpy array indexed [k, j, i] (z, y, x), sharing
+// physreg's memory layout (x fastest), so images and mesh nodes pass without copies where the
+// layout allows. Positions are mm in ITK's LPS space.
+#include "app.hpp"
+#include "progress.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/core/landmark.hpp"
+#include "physreg/core/version.hpp"
+#include "physreg/evaluation/surface_distance.hpp"
+#include "physreg/evaluation/tre.hpp"
+#include "physreg/io/image_io.hpp"
+#include "physreg/io/landmarks_io.hpp"
+#include "physreg/io/mesh_io.hpp"
+#include "physreg/io/surface_io.hpp"
+#include "physreg/mesh/hex_meshing.hpp"
+#include "physreg/mesh/surface_extraction.hpp"
+#include "physreg/mesh/tetrahedral_meshing.hpp"
+#include "physreg/model/tissue_table.hpp"
+
+#include <pybind11/functional.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <cmath>
+
+namespace py = pybind11;
+using namespace physreg;
+
+namespace {
+
+template <typename T>
+using CArray = py::array_t<T, py::array::c_style>;
+
+// ---- argument checks: TypeError for the wrong kind of object/dtype, ValueError for shapes --------
+
+void require_dtype(const py::array& a, const py::dtype& expected, const char* argument)
+{
+    if (!a.dtype().is(expected))
+        throw py::type_error(fmt::format("{}: expected dtype {}, got {}", argument, std::string(py::str(py::object(expected))), std::string(py::str(py::object(a.dtype())))));
+}
+
+void require_c_contiguous(const py::array& a, const char* argument)
+{
+    if (!(a.flags() & py::array::c_style))
+        throw py::value_error(fmt::format("{}: the array must be C-contiguous (use numpy.ascontiguousarray)", argument));
+}
+
+/// An (N, 3) float64 array of points, copied into Vec3s; ValueError naming `argument`.
+std::vector<Vec3> points_from(const py::array& a, const char* argument)
+{
+    require_dtype(a, py::dtype::of<double>(), argument);
+    if (a.ndim() != 2 || a.shape(1) != 3)
+        throw py::value_error(fmt::format("{}: expected shape (N, 3), got {}", argument, std::string(py::str(py::tuple(py::cast(std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim())))))));
+    const auto view = a.cast<CArray<double>>().unchecked<2>();
+    std::vector<Vec3> out(static_cast<std::size_t>(a.shape(0)));
+    for (py::ssize_t n = 0; n < a.shape(0); ++n) {
+        out[static_cast<std::size_t>(n)] = Vec3(view(n, 0), view(n, 1), view(n, 2));
+        if (!out[static_cast<std::size_t>(n)].allFinite()) throw py::value_error(fmt::format("{}: row {} is not finite", argument, n));
+    }
+    return out;
+}
+
+/// A view of a std::vector<Vec3> (N, 3) float64 owned by `owner`.
+py::array points_view(std::vector<Vec3>& points, py::handle owner)
+{
+    return py::array_t<double>({static_cast<py::ssize_t>(points.size()), py::ssize_t{3}}, {sizeof(Vec3), sizeof(double)},
+                               points.empty() ? nullptr : points.front().data(), owner);
+}
+
+// ---- images ---------------------------------------------------------------------------------------
+
+py::array volume_shape_check(const py::array& a, const char* argument)
+{
+    if (a.ndim() != 3) throw py::value_error(fmt::format("{}: expected a 3-D array indexed [z, y, x], got {} dimensions", argument, a.ndim()));
+    require_c_contiguous(a, argument);
+    return a;
+}
+
+ImageGeometry geometry_for(const py::array& a, const ImageGeometry& given, const char* argument)
+{
+    ImageGeometry g = given;
+    g.size = Index3{a.shape(2), a.shape(1), a.shape(0)};
+    g.validate(argument);
+    return g;
+}
+
+template <typename Image, typename Value>
+py::array image_array(Image&& image, std::vector<Value> Image::*values, int components)
+{
+    auto* owned = new Image(std::move(image));
+    py::capsule owner(owned, [](void* p) { delete static_cast<Image*>(p); });
+    const auto& g = owned->geometry;
+    std::vector<py::ssize_t> shape{g.size[2], g.size[1], g.size[0]};
+    if (components > 1) shape.push_back(components);
+    return py::array_t<Value>(shape, ((*owned).*values).data(), owner);
+}
+
+// ---- meshes ---------------------------------------------------------------------------------------
+
+py::array_t<std::int32_t> cells_view(VolumeMesh& mesh, py::handle owner)
+{
+    const py::ssize_t k = mesh.cell_size();
+    return py::array_t<std::int32_t>({static_cast<py::ssize_t>(mesh.cell_count()), k}, mesh.cells.data(), owner);
+}
+
+LandmarkSet landmarks_from(const std::vector<std::string>& names, const py::array& positions, const char* argument)
+{
+    const std::vector<Vec3> p = points_from(positions, argument);
+    if (p.size() != names.size())
+        throw py::value_error(fmt::format("{}: {} positions for {} names", argument, p.size(), names.size()));
+    LandmarkSet set(p.size());
+    for (std::size_t n = 0; n < p.size(); ++n) set[n] = {names[n], p[n], LandmarkType::unspecified};
+    return set;
+}
+
+py::dict stats_dict(const TreStats& s)
+{
+    py::dict d;
+    d["count"] = s.count;
+    d["mean_mm"] = s.mean_mm;
+    d["std_mm"] = s.std_mm;
+    d["max_mm"] = s.max_mm;
+    return d;
+}
+
+} // namespace
+
+PYBIND11_MODULE(_physreg, m)
+{
+    m.doc() = "physreg: biomechanical volumetric registration (C++ core). Units: mm, Pa, N; LPS space.";
+    m.attr("__version__") = physreg::VERSION;
+
+    static py::exception<Error> error(m, "Error", PyExc_RuntimeError);
+    py::register_exception_translator([](std::exception_ptr p) {
+        try {
+            if (p) std::rethrow_exception(p);
+        } catch (const MissingFileError& e) {
+            PyErr_SetString(PyExc_FileNotFoundError, e.what());
+        } catch (const Error& e) {
+            error(e.what());
+        }
+    });
+
+    py::class_<ImageGeometry>(m, "ImageGeometry",
+                              "Where an image lies: origin (mm, centre of voxel 0,0,0), spacing (mm per voxel along i, j, k), "
+                              "direction (3×3, columns = image axes in LPS) and size (voxels along i, j, k).")
+        .def(py::init([](std::array<double, 3> origin, std::array<double, 3> spacing, std::optional<py::array> direction) {
+                 ImageGeometry g;
+                 g.origin = Vec3(origin[0], origin[1], origin[2]);
+                 g.spacing = Vec3(spacing[0], spacing[1], spacing[2]);
+                 if (direction) {
+                     const auto d = direction->cast<CArray<double>>();
+                     if (d.ndim() != 2 || d.shape(0) != 3 || d.shape(1) != 3) throw py::value_error("direction: expected shape (3, 3)");
+                     for (int r = 0; r < 3; ++r)
+                         for (int c = 0; c < 3; ++c) g.direction(r, c) = d.at(r, c);
+                 }
+                 g.size = Index3{1, 1, 1};
+                 g.validate("ImageGeometry");
+                 return g;
+             }),
+             py::arg("origin") = std::array<double, 3>{0, 0, 0}, py::arg("spacing") = std::array<double, 3>{1, 1, 1}, py::arg("direction") = py::none())
+        .def_property_readonly("origin", [](const ImageGeometry& g) { return std::array<double, 3>{g.origin[0], g.origin[1], g.origin[2]}; })
+        .def_property_readonly("spacing", [](const ImageGeometry& g) { return std::array<double, 3>{g.spacing[0], g.spacing[1], g.spacing[2]}; })
+        .def_property_readonly("size", [](const ImageGeometry& g) { return std::array<std::int64_t, 3>{g.size[0], g.size[1], g.size[2]}; })
+        .def_property_readonly("direction", [](const ImageGeometry& g) {
+            py::array_t<double> d({3, 3});
+            for (int r = 0; r < 3; ++r)
+                for (int c = 0; c < 3; ++c) d.mutable_at(r, c) = g.direction(r, c);
+            return d;
+        })
+        .def("index_to_physical", [](const ImageGeometry& g, std::array<double, 3> ijk) {
+            const Vec3 x = g.index_to_physical(Vec3(ijk[0], ijk[1], ijk[2]));
+            return std::array<double, 3>{x[0], x[1], x[2]};
+        }, py::arg("ijk"), "Continuous index (i, j, k) → physical point (mm, LPS).")
+        .def("__repr__", [](const ImageGeometry& g) {
+            return fmt::format("ImageGeometry(size=({}, {}, {}), spacing=({:g}, {:g}, {:g}) mm, origin=({:g}, {:g}, {:g}) mm)", g.size[0], g.size[1], g.size[2],
+                               g.spacing[0], g.spacing[1], g.spacing[2], g.origin[0], g.origin[1], g.origin[2]);
+        });
+
+    m.def("read_labels", [](const std::filesystem::path& path) {
+        LabelVolume v = read_label_volume(path);
+        const ImageGeometry g = v.geometry;
+        return py::make_tuple(image_array(std::move(v), &LabelVolume::labels, 1), g);
+    }, py::arg("path"),
+          "Reads a label volume (NIfTI, NRRD, MetaImage, DICOM directory) → (uint16 array [z, y, x], ImageGeometry). "
+          "Raises FileNotFoundError for a missing file and physreg.Error for a corrupt one or non-integral labels.");
+    m.def("read_image", [](const std::filesystem::path& path) {
+        ScalarImage v = read_scalar_image(path);
+        const ImageGeometry g = v.geometry;
+        return py::make_tuple(image_array(std::move(v), &ScalarImage::values, 1), g);
+    }, py::arg("path"), "Reads a scalar image → (float32 array [z, y, x], ImageGeometry).");
+    m.def("read_displacement_field", [](const std::filesystem::path& path) {
+        DisplacementField f = read_displacement_field(path);
+        const ImageGeometry g = f.geometry;
+        return py::make_tuple(image_array(std::move(f), &DisplacementField::components, 3), g);
+    }, py::arg("path"), "Reads an ITK displacement field → (float32 array [z, y, x, 3] of (ux, uy, uz) in mm, LPS; ImageGeometry).");
+    m.def("write_labels", [](const std::filesystem::path& path, const py::array& labels, const ImageGeometry& geometry) {
+        volume_shape_check(labels, "labels");
+        require_dtype(labels, py::dtype::of<std::uint16_t>(), "labels");
+        LabelVolume v;
+        v.geometry = geometry_for(labels, geometry, "geometry");
+        const auto* data = static_cast<const std::uint16_t*>(labels.data());
+        v.labels.assign(data, data + labels.size());
+        write_label_volume(path, v);
+    }, py::arg("path"), py::arg("labels"), py::arg("geometry"), "Writes a uint16 label array [z, y, x] (atomically: temporary file, then rename).");
+    m.def("write_image", [](const std::filesystem::path& path, const py::array& image, const ImageGeometry& geometry) {
+        volume_shape_check(image, "image");
+        require_dtype(image, py::dtype::of<float>(), "image");
+        ScalarImage v;
+        v.geometry = geometry_for(image, geometry, "geometry");
+        const auto* data = static_cast<const float*>(image.data());
+        v.values.assign(data, data + image.size());
+        write_scalar_image(path, v);
+    }, py::arg("path"), py::arg("image"), py::arg("geometry"), "Writes a float32 image [z, y, x] (atomically).");
+    m.def("write_displacement_field", [](const std::filesystem::path& path, const py::array& field, const ImageGeometry& geometry) {
+        if (field.ndim() != 4 || field.shape(3) != 3) throw py::value_error("field: expected shape (nz, ny, nx, 3)");
+        require_c_contiguous(field, "field");
+        require_dtype(field, py::dtype::of<float>(), "field");
+        DisplacementField f;
+        f.geometry = geometry;
+        f.geometry.size = Index3{field.shape(2), field.shape(1), field.shape(0)};
+        f.geometry.validate("geometry");
+        const auto* data = static_cast<const float*>(field.data());
+        f.components.assign(data, data + field.size());
+        write_displacement_field(path, f);
+    }, py::arg("path"), py::arg("field"), py::arg("geometry"),
+          "Writes a displacement field (float32 [z, y, x, 3], mm, LPS) that ITK, ANTs and 3D Slicer read as a transform.");
+
+    py::class_<VolumeMesh>(m, "Mesh", "A volume mesh: nodes (N, 3) mm LPS, cells (M, 4 or 8) node ids, one tissue label per cell.")
+        .def_property_readonly("nodes", [](py::object self) { return points_view(self.cast<VolumeMesh&>().nodes, self); },
+                               "(N, 3) float64 node positions, mm (a view: writes change the mesh)")
+        .def_property_readonly("cells", [](py::object self) { return cells_view(self.cast<VolumeMesh&>(), self); }, "(M, k) int32 node ids (view)")
+        .def_property_readonly("cell_labels", [](py::object self) {
+            auto& mesh = self.cast<VolumeMesh&>();
+            return py::array_t<std::int32_t>({static_cast<py::ssize_t>(mesh.cell_labels.size())}, mesh.cell_labels.data(), self);
+        }, "(M,) int32 tissue label per cell (view)")
+        .def_property_readonly("cell_type", [](const VolumeMesh& mesh) { return to_string(mesh.cell_type); })
+        .def_property_readonly("node_count", &VolumeMesh::node_count)
+        .def_property_readonly("cell_count", &VolumeMesh::cell_count)
+        .def("volume_per_label", [](const VolumeMesh& mesh) {
+            std::map<std::int32_t, double> out;
+            for (const auto& [label, volume] : volume_per_label(mesh)) out[label] = volume;
+            return out;
+        }, "{label: volume in mm³}")
+        .def("__repr__", [](const VolumeMesh& mesh) {
+            return fmt::format("Mesh({} nodes, {} {} cells)", mesh.node_count(), mesh.cell_count(), to_string(mesh.cell_type));
+        });
+
+    m.def("read_mesh", [](const std::filesystem::path& path) { return read_volume_mesh(path); }, py::arg("path"),
+          "Reads a volume mesh (VTK XML .vtu or Gmsh .msh).");
+    m.def("write_mesh", [](const std::filesystem::path& path, const VolumeMesh& mesh) { write_volume_mesh(path, mesh); }, py::arg("path"), py::arg("mesh"),
+          "Writes a volume mesh (.vtu; .msh for Gmsh 4.1, .v2.msh for 2.2; atomically).");
+    m.def("mesh_from_labels", [](const py::array& labels, const ImageGeometry& geometry, const std::string& kind, std::optional<std::array<int, 3>> grid,
+                                 double cell_size_mm, double facet_distance_mm, std::optional<std::vector<std::int32_t>> only, unsigned seed) {
+        volume_shape_check(labels, "labels");
+        require_dtype(labels, py::dtype::of<std::uint16_t>(), "labels");
+        LabelVolume v;
+        v.geometry = geometry_for(labels, geometry, "geometry");
+        const auto* data = static_cast<const std::uint16_t*>(labels.data());
+        v.labels.assign(data, data + labels.size());
+        if (kind == "hex") {
+            MeshingOptions o;
+            if (grid) o.grid_dims = Index3{(*grid)[0], (*grid)[1], (*grid)[2]};
+            py::gil_scoped_release release;
+            return mesh_label_volume(v, default_tissue_table(), o, "labels").mesh;
+        }
+        if (kind == "tet") {
+            if (!(cell_size_mm > 0) || !std::isfinite(cell_size_mm)) throw py::value_error(fmt::format("cell_size_mm: {} must be a positive number", cell_size_mm));
+            if (!(facet_distance_mm > 0) || !std::isfinite(facet_distance_mm)) throw py::value_error(fmt::format("facet_distance_mm: {} must be a positive number", facet_distance_mm));
+            TetMeshingOptions o;
+            o.default_cell_size_mm = cell_size_mm;
+            o.facet_size_mm = cell_size_mm;
+            o.facet_distance_mm = facet_distance_mm;
+            o.seed = seed;
+            o.seed_every_component = true;
+            if (only) o.labels.insert(only->begin(), only->end());
+            py::gil_scoped_release release;
+            return mesh_labels_tetrahedral(v, o, "labels");
+        }
+        throw py::value_error(fmt::format("kind: '{}' is not one of 'hex', 'tet'", kind));
+    }, py::arg("labels"), py::arg("geometry"), py::arg("kind") = "hex", py::arg("grid") = py::none(), py::arg("cell_size_mm") = 6.0,
+          py::arg("facet_distance_mm") = 0.75, py::arg("labels_meshed") = py::none(), py::arg("seed") = 1u,
+          "Meshes a label volume. kind='hex': uniform hexahedra straight from the voxels (paper 000), optionally "
+          "coarsened to `grid` cells (i, j, k) over the labels' bounding box; kind='tet': conforming tetrahedra (CGAL Mesh_3), "
+          "largest circumradius cell_size_mm (mm), facets within facet_distance_mm (mm) of the label interfaces.");
+
+    py::class_<SurfaceMesh>(m, "Surface", "A triangle surface: vertices (N, 3) mm LPS, triangles (M, 3) vertex ids.")
+        .def(py::init([](const py::array& vertices, const py::array& triangles) {
+                 SurfaceMesh s;
+                 s.vertices = points_from(vertices, "vertices");
+                 require_dtype(triangles, py::dtype::of<std::int32_t>(), "triangles");
+                 if (triangles.ndim() != 2 || triangles.shape(1) != 3) throw py::value_error("triangles: expected shape (M, 3)");
+                 const auto t = triangles.cast<CArray<std::int32_t>>().unchecked<2>();
+                 for (py::ssize_t r = 0; r < triangles.shape(0); ++r) {
+                     std::array<std::int32_t, 3> tri{t(r, 0), t(r, 1), t(r, 2)};
+                     for (auto v : tri)
+                         if (v < 0 || static_cast<std::size_t>(v) >= s.vertices.size())
+                             throw py::value_error(fmt::format("triangles: row {} names vertex {} (there are {})", r, v, s.vertices.size()));
+                     s.triangles.push_back(tri);
+                 }
+                 return s;
+             }),
+             py::arg("vertices"), py::arg("triangles"))
+        .def_property_readonly("vertices", [](py::object self) { return points_view(self.cast<SurfaceMesh&>().vertices, self); })
+        .def_property_readonly("triangles", [](py::object self) {
+            auto& s = self.cast<SurfaceMesh&>();
+            return py::array_t<std::int32_t>({static_cast<py::ssize_t>(s.triangles.size()), py::ssize_t{3}}, s.triangles.empty() ? nullptr : s.triangles.front().data(), self);
+        })
+        .def("__repr__", [](const SurfaceMesh& s) { return fmt::format("Surface({} vertices, {} triangles)", s.vertices.size(), s.triangles.size()); });
+    m.def("read_surface", [](const std::filesystem::path& path) { return read_surface(path); }, py::arg("path"), "Reads an STL/PLY/OBJ/VTK surface (mm).");
+    m.def("write_surface", [](const std::filesystem::path& path, const SurfaceMesh& s) { write_surface(path, s); }, py::arg("path"), py::arg("surface"));
+    m.def("boundary_surface", [](const VolumeMesh& mesh) { return extract_boundary(mesh); }, py::arg("mesh"),
+          "The outer boundary of a volume mesh as a triangle surface.");
+
+    m.def("read_landmarks", [](const std::filesystem::path& path) {
+        const LandmarkSet set = read_landmarks(path);
+        py::array_t<double> positions({static_cast<py::ssize_t>(set.size()), py::ssize_t{3}});
+        std::vector<std::string> names, types;
+        for (std::size_t n = 0; n < set.size(); ++n) {
+            names.push_back(set[n].name);
+            types.push_back(to_string(set[n].type));
+            for (int a = 0; a < 3; ++a) positions.mutable_at(static_cast<py::ssize_t>(n), a) = set[n].position[a];
+        }
+        return py::make_tuple(names, positions, types);
+    }, py::arg("path"), "Reads landmarks (CSV, Slicer .fcsv or .mrk.json) → (names, (N, 3) positions mm LPS, types).");
+    m.def("write_landmarks", [](const std::filesystem::path& path, const std::vector<std::string>& names, const py::array& positions) {
+        write_landmarks(path, landmarks_from(names, positions, "positions"));
+    }, py::arg("path"), py::arg("names"), py::arg("positions"), "Writes landmarks (.csv, .fcsv or .mrk.json for 3D Slicer's Markups; atomically).");
+
+    m.def("tre", [](const py::array& predicted, const py::array& truth) {
+        const std::vector<Vec3> p = points_from(predicted, "predicted"), t = points_from(truth, "truth");
+        if (p.size() != t.size()) throw py::value_error(fmt::format("predicted: {} points but truth has {}", p.size(), t.size()));
+        if (p.empty()) throw py::value_error("truth: no landmark");
+        py::array_t<double> errors(static_cast<py::ssize_t>(p.size()));
+        std::vector<double> e(p.size());
+        for (std::size_t n = 0; n < p.size(); ++n) errors.mutable_at(static_cast<py::ssize_t>(n)) = e[n] = (p[n] - t[n]).norm();
+        py::dict d = stats_dict(tre_stats(e));
+        d["errors_mm"] = errors;
+        return d;
+    }, py::arg("predicted"), py::arg("truth"),
+          "Target registration error between matched rows of two (N, 3) arrays (mm): {'errors_mm', 'count', 'mean_mm', 'std_mm', 'max_mm'}.");
+    m.def("hausdorff", [](const SurfaceMesh& first, const SurfaceMesh& second) {
+        HausdorffReport r;
+        {
+            py::gil_scoped_release release;
+            r = hausdorff_distance(first, second, "hausdorff");
+        }
+        py::dict d;
+        d["max_mm"] = r.max_mm();
+        d["mean_mm"] = r.mean_mm();
+        d["forward_max_mm"] = r.forward.max_mm;
+        d["backward_max_mm"] = r.backward.max_mm;
+        d["forward_mean_mm"] = r.forward.mean_mm;
+        d["backward_mean_mm"] = r.backward.mean_mm;
+        return d;
+    }, py::arg("first"), py::arg("second"),
+          "Sampled symmetric Hausdorff distance between two surfaces (vertices and triangle centroids to the exact closest point), mm.");
+
+    m.def("run", [](const std::vector<std::string>& args, std::optional<py::function> progress) {
+        struct Restore {
+            ~Restore() { cli::set_progress_sink({}); }
+        } restore;
+        if (progress) {
+            py::function callback = *progress;
+            cli::set_progress_sink([callback](const std::string& label, double fraction, const std::string& message) {
+                callback(label, fraction, message);
+                if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+            });
+        }
+        cli::run_in_process(args);
+    }, py::arg("args"), py::arg("progress") = py::none(),
+          "Runs `physreg ARGS...` in this process (the same commands, checks and messages as the program). "
+          "progress(label, fraction 0–1, message) is called on long work instead of the terminal bar.");
+}

@@ -1,0 +1,60 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""physreg — biomechanical volumetric registration for image-guided surgery.
+
+Units are millimetres, pascals and newtons; positions are in ITK's physical LPS space. Volumes are
+numpy arrays indexed [z, y, x] (as SimpleITK's GetArrayFromImage), each with an ImageGeometry.
+
+Building blocks (C++ core, arrays without copies where the layout allows):
+    read_labels, read_image, read_displacement_field, write_labels, write_image,
+    write_displacement_field, ImageGeometry, read_mesh, write_mesh, mesh_from_labels, Mesh,
+    read_surface, write_surface, boundary_surface, Surface, read_landmarks, write_landmarks,
+    tre, hausdorff
+
+The commands of the `physreg` program, run in this process with the same checks and messages,
+each returning the summary it wrote (a dict):
+    phantom, simulate, register_compression, register_surface, register_images, evaluate,
+    enrich_build, enrich_apply, run
+
+Errors: physreg.Error (a RuntimeError) for bad input or a failed solve, FileNotFoundError for a
+missing input, TypeError/ValueError for arrays of the wrong dtype or shape.
+"""
+import os as _os
+from pathlib import Path as _Path
+
+# Commands run in-process draw report.html with this package's report module.
+_os.environ.setdefault("PHYSREG_PYTHONPATH", str(_Path(__file__).resolve().parent.parent))
+
+from ._physreg import (  # noqa: F401,E402
+    Error,
+    ImageGeometry,
+    Mesh,
+    Surface,
+    __version__,
+    boundary_surface,
+    hausdorff,
+    mesh_from_labels,
+    read_displacement_field,
+    read_image,
+    read_labels,
+    read_landmarks,
+    read_mesh,
+    read_surface,
+    tre,
+    write_displacement_field,
+    write_image,
+    write_labels,
+    write_landmarks,
+    write_mesh,
+    write_surface,
+)
+from ._commands import (  # noqa: F401,E402
+    enrich_apply,
+    enrich_build,
+    evaluate,
+    phantom,
+    register_compression,
+    register_images,
+    register_surface,
+    run,
+    simulate,
+)
