@@ -41,7 +41,7 @@ done
 # The main job on the built-in phantom.
 expect_ok "demo --quick" "$physreg" --log-level warn demo --quick -o "$work/demo"
 grep -q "coarse-to-fine" "$work/out.txt" && grep -q "paper 000" "$work/out.txt" && pass || failed "demo prints the TRE table beside paper 000"
-for f in summary.json params.json enrichment.phe figures/tre.png figures/difference_D.png figures/slices_E_coarse_to_fine.png \
+for f in summary.json report.html params.json enrichment.phe figures/tre.png figures/difference_D.png figures/slices_E_coarse_to_fine.png \
          registration/D_fine.vtu registration/E_homogeneous.vtu registration/D_landmarks_coarse_to_fine.csv phantom/manifest.json; do
   expect_file "$work/demo/$f"
 done
@@ -186,7 +186,7 @@ ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
 # physreg register-surface (paper 001) on the small phantom's insufflation, then from plain files.
 rs="--log-level warn register-surface --cell-size 10 --max-steps-per-plateau 20"
 expect_ok "register-surface dataset" "$physreg" $rs --dataset "$work/ph" --visible 50 -o "$work/rs" --json
-for f in mesh.vtu displacement.nii.gz landmarks.csv regions.ply regions.vtk registered_surface.ply summary.json; do expect_file "$work/rs/$f"; done
+for f in mesh.vtu displacement.nii.gz landmarks.csv regions.ply regions.vtk registered_surface.ply summary.json report.html; do expect_file "$work/rs/$f"; done
 for key in '"biomechanical"' '"rigid"' '"icp"' '"at_rest"' '"hausdorff_mm"' '"node_tre_mm"' '"plateaus"' '"tre"'; do
   grep -q "$key" "$work/rs/summary.json" && pass || failed "register-surface summary lacks $key"
 done
@@ -227,9 +227,16 @@ expect_error "register-surface: vessels without the heterogeneous model" "only t
 # method with label baselines, then bad inputs (each: clear message, non-zero exit, no output).
 ri="--log-level warn register-images --cycles 4 --cell-size 8"
 expect_ok "register-images dataset" "$physreg" $ri --dataset "$work/ph" --baselines labels -o "$work/ri" --json
-for f in warped_labels.nii.gz warped_moving.nii.gz displacement.nii.gz landmarks.csv mesh.vtu parameters.json summary.json; do
+for f in warped_labels.nii.gz warped_moving.nii.gz displacement.nii.gz landmarks.csv mesh.vtu parameters.json summary.json report.html; do
   expect_file "$work/ri/$f"
 done
+grep -q '<h2>Accuracy</h2>' "$work/ri/report.html" && grep -q 'data:image/png;base64' "$work/ri/report.html" && pass || failed "register-images report.html has the accuracy table and inline figures"
+# --no-report: no report.html; --quiet: no progress lines and no info logs on stderr.
+expect_ok "register-images --no-report --quiet" "$physreg" --quiet --no-report register-images --cycles 2 --cell-size 8 --dataset "$work/ph" --baselines none -o "$work/ri_quiet"
+expect_no_file "$work/ri_quiet/report.html"
+expect_file "$work/ri_quiet/summary.json"
+grep -q '%' "$work/err.txt" && failed "--quiet still printed progress" || pass
+grep -q '\[info\]' "$work/err.txt" && failed "--quiet still printed info logs" || pass
 for key in '"biomechanical"' '"bspline_labels"' '"demons_labels"' '"rigid_labels"' '"dice"' '"internal"' '"estimated_moduli_pa"'; do
   grep -q "$key" "$work/ri/summary.json" && pass || failed "register-images summary lacks $key"
 done
@@ -296,7 +303,7 @@ grep -q 'VALIDATION' "$work/err.txt" && pass || failed "estimate prints the vali
 grep -q '"mesh_fingerprint"' "$work/params.json" && pass || failed "parameter file carries the mesh fingerprint"
 expect_ok "register-compression" "$physreg" --log-level warn register-compression --dataset "$work/ph" --state D \
   --parameters "$work/params.json" -o "$work/reg_D" --json
-for f in mesh.vtu landmarks.csv displacement.nii.gz summary.json; do expect_file "$work/reg_D/$f"; done
+for f in mesh.vtu landmarks.csv displacement.nii.gz summary.json report.html; do expect_file "$work/reg_D/$f"; done
 expect_ok "info reads the predicted field" "$physreg" info "$work/reg_D/displacement.nii.gz"
 expect_ok "register-compression homogeneous" "$physreg" --log-level warn register-compression --dataset "$work/ph" --state D \
   --variant homogeneous $g -o "$work/reg_D_h"
