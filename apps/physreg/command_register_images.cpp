@@ -248,7 +248,7 @@ void add_subcommand_register_images_impl(CLI::App& app)
     cmd->add_option("--demons-sigma", o->demons_sigma, "Demons field smoothing σ, voxels")->capture_default_str();
     cmd->add_option("--seed", o->seed, "meshing and metric-sampling seed")->capture_default_str();
     cmd->add_option("-o,--output", o->output, "output folder (staged: appears only when complete)")->required();
-    cmd->add_flag("--replace", o->replace, "replace an existing output folder");
+    cmd->add_flag("--force,--replace", o->replace, "replace an existing output folder (only once the new one is complete; --replace: the older name)");
     cmd->add_flag("--json", o->json, "print the summary as JSON on stdout");
     cmd->callback([o] {
         const auto start = std::chrono::steady_clock::now();

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/mechanics/simulation.hpp"
 
+#include "physreg/core/config_keys.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/io/image_io.hpp"
@@ -23,13 +24,9 @@ struct Reader {
     void check_keys(const YAML::Node& node, std::initializer_list<const char*> allowed, const std::string& where) const
     {
         if (!node || !node.IsMap()) return;
-        for (const auto& entry : node) {
-            const auto key = entry.first.as<std::string>();
-            if (std::find_if(allowed.begin(), allowed.end(), [&](const char* a) { return key == a; }) != allowed.end()) continue;
-            std::string list;
-            for (const char* a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
-            fail("{}: unknown key '{}' in {} (accepted there: {})", what, key, where, list);
-        }
+        std::vector<std::string> keys;
+        for (const auto& entry : node) keys.push_back(entry.first.as<std::string>());
+        require_known_keys(keys, std::vector<std::string_view>(allowed.begin(), allowed.end()), what, where);
     }
 
     template <typename T>

@@ -2,6 +2,7 @@
 #include "physreg/model/tissue_table.hpp"
 
 #include "physreg/core/atomic_file.hpp"
+#include "physreg/core/config_keys.hpp"
 #include "physreg/core/error.hpp"
 
 #include <cmath>
@@ -53,10 +54,17 @@ TissueTable read_tissue_table(const std::filesystem::path& path)
     }
     if (!root.IsMap() || !root["tissues"] || !root["tissues"].IsSequence())
         fail("{}: expected a map with a 'tissues' list", what);
+    const auto keys_of = [](const YAML::Node& map) {
+        std::vector<std::string> keys;
+        for (const auto& entry : map) keys.push_back(entry.first.as<std::string>());
+        return keys;
+    };
+    require_known_keys(keys_of(root), {"tissues", "ignore_labels"}, what, "the table");
     TissueTable table;
     std::size_t index = 0;
     for (const auto& node : root["tissues"]) {
-        const std::string where = fmt::format("{}: tissues[{}]", what, index++);
+        const std::string where = fmt::format("{}: tissues[{}]", what, index);
+        if (!node.IsMap()) fail("{}: expected a map (label, name, young_modulus_pa, poisson_ratio, …)", where);
         auto number = [&](const char* key, std::optional<double> fallback) -> double {
             if (!node[key]) {
                 if (fallback) return *fallback;
@@ -79,6 +87,9 @@ TissueTable read_tissue_table(const std::filesystem::path& path)
             if (node[legacy])
                 fail("{}: key '{}' is ambiguous about units; use young_modulus_pa, poisson_ratio, density_kg_m3",
                      where, legacy);
+        require_known_keys(keys_of(node), {"label", "name", "young_modulus_pa", "poisson_ratio", "density_kg_m3", "mooney_rivlin_c01_fraction"}, what,
+                           fmt::format("tissues[{}]", index));
+        ++index;
         t.young_modulus_pa = number("young_modulus_pa", std::nullopt);
         t.poisson_ratio = number("poisson_ratio", std::nullopt);
         t.density_kg_m3 = number("density_kg_m3", 1000.0);

@@ -2,6 +2,7 @@
 #include "physreg/registration/liver_model.hpp"
 
 #include "physreg/core/atomic_file.hpp"
+#include "physreg/core/config_keys.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/mesh/coarsen.hpp"
@@ -90,6 +91,21 @@ ModelParameters read_model_parameters(const std::filesystem::path& path, std::st
         fail("parameter file '{}': not valid JSON: {}", path.string(), e.what());
     }
     ModelParameters p;
+    const std::string what = "parameter file '" + path.string() + "'";
+    if (!j.is_object()) fail("{}: expected a JSON object", what);
+    const auto keys_of = [](const json& object) {
+        std::vector<std::string> keys;
+        if (object.is_object())
+            for (const auto& item : object.items()) keys.push_back(item.key());
+        return keys;
+    };
+    require_known_keys(keys_of(j),
+                       {"format", "format_version", "variant", "coupling_stiffness_n_per_m", "young_modulus_pa", "poisson_ratio", "grid_cells",
+                        "mls_support_radius_cells", "mesh_fingerprint", "fit"},
+                       what, "the file");
+    if (j.contains("coupling_stiffness_n_per_m"))
+        require_known_keys(keys_of(j["coupling_stiffness_n_per_m"]), {"parenchyma_tumour", "parenchyma_vessel"}, what, "coupling_stiffness_n_per_m");
+    if (j.contains("young_modulus_pa")) require_known_keys(keys_of(j["young_modulus_pa"]), {"parenchyma", "tumour", "vessel"}, what, "young_modulus_pa");
     try {
         if (j.at("format").get<std::string>() != parameters_format) fail("parameter file '{}': format is not {}", path.string(), parameters_format);
         if (j.at("format_version").get<int>() != parameters_version)

@@ -331,6 +331,11 @@ sed 's/"parenchyma_tumour": [0-9.e+]*/"parenchyma_tumour": -3/' "$work/params.js
 expect_error "register: negative stiffness in the file" "params_neg.json" "$physreg" register-compression --dataset "$work/ph" --state D \
   --parameters "$work/params_neg.json" -o "$work/reg_bad2"
 expect_no_file "$work/reg_bad2"
+sed 's/"poisson_ratio"/"poisson_ration"/' "$work/params.json" > "$work/params_typo.json"
+expect_error "register: misspelt key in the parameter file" "unknown key 'poisson_ration' in the file" "$physreg" register-compression \
+  --dataset "$work/ph" --state D --parameters "$work/params_typo.json" -o "$work/reg_bad2b"
+grep -q "did you mean 'poisson_ratio'" "$work/err.txt" && pass || failed "parameter-file typo gets a suggestion"
+expect_no_file "$work/reg_bad2b"
 expect_error "register: grid finer than the voxels" "larger than" "$physreg" register-compression --dataset "$work/ph" --state D --grid 500x27x12 -o "$work/reg_bad3"
 expect_no_file "$work/reg_bad3"
 head -n 5 "$work/reg_D/landmarks.csv" > "$work/few.csv"

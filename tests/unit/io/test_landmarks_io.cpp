@@ -85,7 +85,8 @@ TEST(IoLandmarks, BadFilesAreRefusedWithReasons)
     EXPECT_NE(error_of(dir / "broken.mrk.json").find("JSON"), std::string::npos);
     std::ofstream(dir / "nothing.fcsv") << "1,2,3\n";
     EXPECT_FALSE(error_of(dir / "nothing.fcsv").empty());
-    EXPECT_NE(error_of(dir / "missing.csv").find("cannot open"), std::string::npos);
+    EXPECT_NE(error_of(dir / "missing.csv").find("missing.csv': file does not exist"), std::string::npos);
+    EXPECT_THROW(read_landmarks(dir / "missing.csv"), MissingFileError);
 }
 
 } // namespace physreg

@@ -114,6 +114,10 @@ TEST(MechanicsSimulationCase, BadCasesNameTheKeyAndReason)
     EXPECT_NE(bogus.find("accepted there: method"), std::string::npos) << bogus;
     EXPECT_NE(error_of([&] { read_simulation_case(with("fixed: [x, y, z]", "fixed: [x, y, z]\n    fix: [x]")); }).find("unknown key 'fix'"),
               std::string::npos);
+    // A typo gets the nearest accepted key.
+    const std::string typo = error_of([&] { read_simulation_case(with("load_steps: 2", "load_step: 2")); });
+    EXPECT_NE(typo.find("unknown key 'load_step' in solver"), std::string::npos) << typo;
+    EXPECT_NE(typo.find("did you mean 'load_steps'?"), std::string::npos) << typo;
     EXPECT_NE(error_of([&] { read_simulation_case(with("mesh: block.vtu", "mesh: block.vtu\nmethod: newton")); }).find("unknown key 'method' in the case"),
               std::string::npos);
     EXPECT_NE(error_of([&] { read_simulation_case(with("mode: static, load_steps: 2", "method: backward-euler, duration_s: 1")); })

@@ -1,4 +1,5 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
+#include "physreg/core/config_keys.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/model/tissue_table.hpp"
 #include "test_support.hpp"
@@ -29,6 +30,26 @@ TEST(ModelTissueTable, ReadsYamlAndJson)
     EXPECT_TRUE(t.ignored_labels.count(7));
     std::ofstream(dir / "t.json") << R"({"tissues": [{"label": 2, "name": "vessel", "young_modulus_pa": 1e6, "poisson_ratio": 0.4}]})";
     EXPECT_DOUBLE_EQ(read_tissue_table(dir / "t.json").find(2)->young_modulus_pa, 1e6);
+}
+
+TEST(ModelTissueTable, UnknownKeysAreErrorsWithTheNearestAcceptedKey)
+{
+    test::TempDir dir;
+    std::ofstream(dir / "typo.yaml") << "tissues:\n  - {label: 1, name: p, young_modulus_pa: 2.0e5, poison_ratio: 0.49}\n";
+    const std::string typo = error_of(dir / "typo.yaml");
+    EXPECT_NE(typo.find("typo.yaml"), std::string::npos) << typo;
+    EXPECT_NE(typo.find("unknown key 'poison_ratio' in tissues[0]"), std::string::npos) << typo;
+    EXPECT_NE(typo.find("did you mean 'poisson_ratio'?"), std::string::npos) << typo;
+    // Misplaced: a tissue's key at the top level; unrelated: no suggestion.
+    std::ofstream(dir / "misplaced.yaml") << "tissues:\n  - {label: 1, name: p, young_modulus_pa: 2.0e5, poisson_ratio: 0.4}\ndensity_kg_m3: 1000\n";
+    const std::string misplaced = error_of(dir / "misplaced.yaml");
+    EXPECT_NE(misplaced.find("unknown key 'density_kg_m3' in the table (accepted there: tissues, ignore_labels)"), std::string::npos) << misplaced;
+    std::ofstream(dir / "json.json") << R"({"tissues": [{"label": 2, "name": "v", "young_modulus_pa": 1e6, "poisson_ratio": 0.4, "colour": "red"}]})";
+    const std::string unrelated = error_of(dir / "json.json");
+    EXPECT_NE(unrelated.find("unknown key 'colour' in tissues[0]"), std::string::npos) << unrelated;
+    EXPECT_EQ(unrelated.find("did you mean"), std::string::npos) << unrelated;
+    EXPECT_EQ(closest_key("Youngs_modulus_pa", {"young_modulus_pa", "poisson_ratio"}), "young_modulus_pa");
+    EXPECT_EQ(closest_key("x", {"young_modulus_pa"}), "");
 }
 
 TEST(ModelTissueTable, RoundTrip)
