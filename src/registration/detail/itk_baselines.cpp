@@ -83,14 +83,22 @@ std::vector<float> field_of(const Transform& transform, const Image* fixed)
     return field;
 }
 
+// The metric's sums are split into a fixed number of work units (added in order), whatever the
+// thread count, so that 1 and 2 threads give the same bits.
+constexpr itk::ThreadIdType metric_work_units = 8;
+
 itk::SmartPointer<itk::ImageToImageMetricv4<Image, Image>> make_metric(bool mutual_information)
 {
+    itk::SmartPointer<itk::ImageToImageMetricv4<Image, Image>> metric;
     if (mutual_information) {
-        auto metric = itk::MattesMutualInformationImageToImageMetricv4<Image, Image>::New();
-        metric->SetNumberOfHistogramBins(50);
-        return metric.GetPointer();
+        auto mattes = itk::MattesMutualInformationImageToImageMetricv4<Image, Image>::New();
+        mattes->SetNumberOfHistogramBins(50);
+        metric = mattes.GetPointer();
+    } else {
+        metric = itk::MeanSquaresImageToImageMetricv4<Image, Image>::New().GetPointer();
     }
-    return itk::MeanSquaresImageToImageMetricv4<Image, Image>::New().GetPointer();
+    metric->SetMaximumNumberOfWorkUnits(metric_work_units);
+    return metric;
 }
 
 PlainBaselineResult rigid(const Image::Pointer& fixed, const Image::Pointer& moving, bool labels_mode, const PlainBaselineOptions& o)
@@ -264,30 +272,33 @@ public:
         derivative.SetSize(n);
         derivative.Fill(0.0);
         const auto count = static_cast<std::int64_t>(points_.size());
-        // Per-thread partial sums added in thread order: the same result at every run.
-        const int threads = omp_get_max_threads();
-        std::vector<std::vector<double>> partial(static_cast<std::size_t>(threads));
-        std::vector<double> sums(static_cast<std::size_t>(threads), 0.0);
-        std::vector<std::int64_t> counts(static_cast<std::size_t>(threads), 0);
-#pragma omp parallel num_threads(threads)
+        // Partial sums over a fixed number of sample chunks, added in chunk order: the same bits
+        // at every run and for every thread count.
+        constexpr std::int64_t chunks = 16;
+        std::vector<std::vector<double>> partial(static_cast<std::size_t>(chunks));
+        std::vector<double> sums(static_cast<std::size_t>(chunks), 0.0);
+        std::vector<std::int64_t> counts(static_cast<std::size_t>(chunks), 0);
+#pragma omp parallel
         {
-            const auto t = static_cast<std::size_t>(omp_get_thread_num());
-            std::vector<double>& local = partial[t];
-            local.assign(n, 0.0);
             BSpline::WeightsType weights(transform_->GetNumberOfWeights());
             BSpline::ParameterIndexArrayType indices(transform_->GetNumberOfWeights());
-#pragma omp for schedule(static)
-            for (std::int64_t s = 0; s < count; ++s) {
-                BSpline::OutputPointType y;
-                bool inside = false;
-                transform_->TransformPoint(points_[static_cast<std::size_t>(s)], y, weights, indices, inside);
-                if (!inside || !interpolator_->IsInsideBuffer(y)) continue;
-                const double r = interpolator_->Evaluate(y) - values_[static_cast<std::size_t>(s)];
-                const auto g = gradient_->Evaluate(y);
-                sums[t] += r * r;
-                ++counts[t];
-                for (unsigned k = 0; k < weights.Size(); ++k)
-                    for (unsigned a = 0; a < 3; ++a) local[a * per_dimension + static_cast<unsigned>(indices[k])] += 2.0 * r * weights[k] * g[a];
+#pragma omp for schedule(dynamic, 1)
+            for (std::int64_t c = 0; c < chunks; ++c) {
+                const auto t = static_cast<std::size_t>(c);
+                std::vector<double>& local = partial[t];
+                local.assign(n, 0.0);
+                for (std::int64_t s = c * count / chunks; s < (c + 1) * count / chunks; ++s) {
+                    BSpline::OutputPointType y;
+                    bool inside = false;
+                    transform_->TransformPoint(points_[static_cast<std::size_t>(s)], y, weights, indices, inside);
+                    if (!inside || !interpolator_->IsInsideBuffer(y)) continue;
+                    const double r = interpolator_->Evaluate(y) - values_[static_cast<std::size_t>(s)];
+                    const auto g = gradient_->Evaluate(y);
+                    sums[t] += r * r;
+                    ++counts[t];
+                    for (unsigned k = 0; k < weights.Size(); ++k)
+                        for (unsigned a = 0; a < 3; ++a) local[a * per_dimension + static_cast<unsigned>(indices[k])] += 2.0 * r * weights[k] * g[a];
+                }
             }
         }
         double sum = 0.0;

@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-3.0-or-later
+# Determinism: the main commands, run with the same inputs and seeds on 1 and on 2 threads, write
+# byte-identical files. summary.json files are compared after dropping run times (keys ending in
+# "seconds" or "_s") and with the two runs' folders in paths made equal; the ITK rigid and Demons
+# baselines' metric figures inside them are compared to 1e-9 relative (ITK 5.2's v4 metric and
+# Demons filter sum one partial per thread; their fields and TRE are identical). report.html embeds
+# the summaries' timings and is not compared.
+set -uo pipefail
+physreg=$1
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+failures=0
+run_all() { # DIR
+  local out=$1 p="$physreg --quiet --no-report"
+  mkdir -p "$out"
+  $p phantom --preset small --seed 3 --depths 6 --no-calculix -o "$out/ph" >/dev/null &&
+  $p mesh "$out/ph/rest/labels.nii.gz" --tissues "$out/ph/ground_truth_tissues.yaml" --grid 20x16x10 -o "$out/mesh.vtu" \
+     --tetrahedra "$out/tets.vtu" >/dev/null &&
+  $p register-compression --dataset "$out/ph" --state A --grid 12x10x6 -o "$out/rc" &&
+  $p register-surface --dataset "$out/ph" --visible 50 --cell-size 10 --max-steps-per-plateau 20 -o "$out/rs" >/dev/null &&
+  $p register-images --dataset "$out/ph" --cycles 2 --cell-size 8 --baselines all -o "$out/ri" >/dev/null
+}
+for t in 1 2; do
+  if ! OMP_NUM_THREADS=$t run_all "$work/t$t" 2>"$work/err$t.txt"; then
+    echo "FAILED: the commands on $t thread(s):"; cat "$work/err$t.txt"; exit 1
+  fi
+done
+compared=0
+while IFS= read -r f; do
+  case "$f" in
+    */report.html) continue ;;
+    */summary.json)
+      python3 - "$work/t1/$f" "$work/t2/$f" "$work/t1" "$work/t2" <<'PY' || { echo "FAILED: $f differs between 1 and 2 threads"; failures=$((failures + 1)); }
+import json, math, sys
+# The runs' own folders appear in input paths: compare them as one.
+a, b = (json.loads(open(p).read().replace(d, "RUN")) for p, d in ((sys.argv[1], sys.argv[3]), (sys.argv[2], sys.argv[4])))
+bad = []
+def walk(x, y, path, loose):
+    if isinstance(x, dict):
+        if not isinstance(y, dict) or set(x) != set(y): bad.append(path); return
+        for k in x:
+            if k.endswith("seconds") or k.endswith("_s"): continue
+            walk(x[k], y[k], f"{path}/{k}", loose or k.startswith(("rigid_", "demons_")))
+    elif isinstance(x, list):
+        if not isinstance(y, list) or len(x) != len(y): bad.append(path); return
+        for i, (p, q) in enumerate(zip(x, y)): walk(p, q, f"{path}[{i}]", loose)
+    elif loose and isinstance(x, float) and isinstance(y, float):
+        if not math.isclose(x, y, rel_tol=1e-9, abs_tol=1e-12): bad.append(path)
+    elif x != y: bad.append(path)
+walk(a, b, "", False)
+if bad: print("  differing:", ", ".join(bad[:10])); sys.exit(1)
+PY
+      ;;
+    *) cmp -s "$work/t1/$f" "$work/t2/$f" || { echo "FAILED: $f differs between 1 and 2 threads"; failures=$((failures + 1)); } ;;
+  esac
+  compared=$((compared + 1))
+done < <(cd "$work/t1" && find . -type f | sort)
+# Both runs wrote the same set of files.
+diff <(cd "$work/t1" && find . -type f | sort) <(cd "$work/t2" && find . -type f | sort) >/dev/null || { echo "FAILED: different files"; failures=$((failures + 1)); }
+echo "$compared files compared, $failures differ"
+[ "$compared" -gt 40 ] || { echo "FAILED: too few files compared"; exit 1; }
+exit $((failures > 0))
