@@ -2,6 +2,7 @@
 // physreg mesh: label volume → uniform hexahedral mesh (paper 000), plus optional surfaces and
 // tetrahedra.
 #include "cli_support.hpp"
+#include "progress.hpp"
 
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
@@ -45,16 +46,24 @@ void add_subcommand_mesh(CLI::App& app)
         options.components = parse_component_policy(o->components);
         options.split_nonmanifold = !o->refuse_nonmanifold;
         const TissueTable tissues = load_tissues(o->tissues);
+        ProgressDisplay bar("mesh");
+        bar.update(0.0, "reading the label volume");
         const LabelVolume volume = read_label_volume(o->labels);
+        bar.update(0.15, "hexahedra");
         const auto result = mesh_label_volume(volume, tissues, options, "label volume '" + o->labels + "'");
         // Compute everything before writing anything, so that a failure leaves no outputs.
         SurfaceMesh surface;
+        bar.update(0.5, "surfaces");
         if (!o->surface.empty()) surface = extract_surfaces(result.mesh);
         VolumeMesh tets;
+        bar.update(0.6, "tetrahedra");
         if (!o->tetrahedra.empty()) tets = split_hexahedra_into_tetrahedra(result.mesh);
+        bar.update(0.7, "writing");
         write_volume_mesh(o->output, result.mesh);
         if (!o->surface.empty()) write_surface(o->surface, surface);
         if (!o->tetrahedra.empty()) write_volume_mesh(o->tetrahedra, tets);
+        bar.update(1.0, "done");
+        bar.finish();
         nlohmann::json summary = mesh_summary(result.mesh, &tissues);
         summary["input"] = {{"file", o->labels}, {"geometry", to_json(volume.geometry)}};
         nlohmann::json voxels = nlohmann::json::object();

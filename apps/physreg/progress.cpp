@@ -31,7 +31,12 @@ ProgressDisplay::ProgressDisplay(std::string label)
 
 ProgressDisplay::~ProgressDisplay()
 {
-    if (m_terminal && !m_finished) std::fputc('\n', stderr);
+    if (m_terminal && m_drawn && !m_finished) std::fputc('\n', stderr);
+}
+
+double ProgressDisplay::elapsed_since_start() const
+{
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - m_start).count();
 }
 
 void ProgressDisplay::update(double fraction, const std::string& message)
@@ -42,6 +47,9 @@ void ProgressDisplay::update(double fraction, const std::string& message)
         return;
     }
     if (g_quiet) return;
+    // Work that ends within a second shows no progress at all.
+    if (!m_drawn && elapsed_since_start() < 1.0) return;
+    m_drawn = true;
     const auto now = std::chrono::steady_clock::now();
     const double elapsed = std::chrono::duration<double>(now - m_start).count();
     const double eta = fraction > 0 ? elapsed * (1 - fraction) / fraction : 0.0;
@@ -63,7 +71,7 @@ void ProgressDisplay::update(double fraction, const std::string& message)
 
 void ProgressDisplay::finish()
 {
-    if (m_terminal && !m_finished) std::fputc('\n', stderr);
+    if (m_terminal && m_drawn && !m_finished) std::fputc('\n', stderr);
     m_finished = true;
 }
 

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Progress on long work: a bar with percentage and ETA on a terminal, a log line every 10 %
-// otherwise (CI logs, pipes).
+// otherwise (CI logs, pipes); nothing for work that ends within a second.
 #include <chrono>
 #include <functional>
 #include <string>
@@ -23,9 +23,11 @@ public:
     void finish();
 
 private:
+    double elapsed_since_start() const;
     std::string m_label;
     bool m_terminal;
     bool m_finished = false;
+    bool m_drawn = false; ///< something was shown (work past its first second)
     int m_last_decile = -1;
     std::chrono::steady_clock::time_point m_start, m_last_draw;
 };

@@ -114,3 +114,14 @@ def test_an_exception_in_the_progress_callback_stops_the_command(dataset, tmp_pa
     with pytest.raises(KeyboardInterrupt):
         physreg.register_compression(tmp_path / "stopped", dataset=dataset, state="A", grid="12x10x6", progress=stop)
     assert not (tmp_path / "stopped").exists()
+
+
+def test_the_example_script_runs_on_a_dataset_and_draws_its_plot(dataset, tmp_path):
+    import runpy
+    import os
+    example = os.path.join(os.environ.get("PHYSREG_SOURCE_DIR", os.path.join(os.path.dirname(__file__), "..", "..")),
+                           "examples", "register_compression_tre.py")
+    module = runpy.run_path(example)
+    result, at_rest = module["main"](tmp_path, dataset, "A")
+    assert (tmp_path / "tre_A.png").stat().st_size > 10_000
+    assert result["count"] == 25 and at_rest["count"] == 25
