@@ -89,6 +89,18 @@ ImageGeometry geometry_for(const py::array& a, const ImageGeometry& given, const
     return g;
 }
 
+/// A uint16 array [z, y, x] and its geometry → a LabelVolume (copied).
+LabelVolume label_volume_from(const py::array& labels, const ImageGeometry& geometry)
+{
+    volume_shape_check(labels, "labels");
+    require_dtype(labels, py::dtype::of<std::uint16_t>(), "labels");
+    LabelVolume v;
+    v.geometry = geometry_for(labels, geometry, "geometry");
+    const auto* data = static_cast<const std::uint16_t*>(labels.data());
+    v.labels.assign(data, data + labels.size());
+    return v;
+}
+
 template <typename Image, typename Value>
 py::array image_array(Image&& image, std::vector<Value> Image::*values, int components)
 {
@@ -200,12 +212,7 @@ PYBIND11_MODULE(_physreg, m)
         return py::make_tuple(image_array(std::move(f), &DisplacementField::components, 3), g);
     }, py::arg("path"), "Reads an ITK displacement field → (float32 array [z, y, x, 3] of (ux, uy, uz) in mm, LPS; ImageGeometry).");
     m.def("write_labels", [](const std::filesystem::path& path, const py::array& labels, const ImageGeometry& geometry) {
-        volume_shape_check(labels, "labels");
-        require_dtype(labels, py::dtype::of<std::uint16_t>(), "labels");
-        LabelVolume v;
-        v.geometry = geometry_for(labels, geometry, "geometry");
-        const auto* data = static_cast<const std::uint16_t*>(labels.data());
-        v.labels.assign(data, data + labels.size());
+        const LabelVolume v = label_volume_from(labels, geometry);
         write_label_volume(path, v);
     }, py::arg("path"), py::arg("labels"), py::arg("geometry"), "Writes a uint16 label array [z, y, x] (atomically: temporary file, then rename).");
     m.def("write_image", [](const std::filesystem::path& path, const py::array& image, const ImageGeometry& geometry) {
@@ -257,12 +264,7 @@ PYBIND11_MODULE(_physreg, m)
           "Writes a volume mesh (.vtu; .msh for Gmsh 4.1, .v2.msh for 2.2; atomically).");
     m.def("mesh_from_labels", [](const py::array& labels, const ImageGeometry& geometry, const std::string& kind, std::optional<std::array<int, 3>> grid,
                                  double cell_size_mm, double facet_distance_mm, std::optional<std::vector<std::int32_t>> only, unsigned seed) {
-        volume_shape_check(labels, "labels");
-        require_dtype(labels, py::dtype::of<std::uint16_t>(), "labels");
-        LabelVolume v;
-        v.geometry = geometry_for(labels, geometry, "geometry");
-        const auto* data = static_cast<const std::uint16_t*>(labels.data());
-        v.labels.assign(data, data + labels.size());
+        const LabelVolume v = label_volume_from(labels, geometry);
         if (kind == "hex") {
             MeshingOptions o;
             if (grid) o.grid_dims = Index3{(*grid)[0], (*grid)[1], (*grid)[2]};
