@@ -125,3 +125,14 @@ def test_the_example_script_runs_on_a_dataset_and_draws_its_plot(dataset, tmp_pa
     result, at_rest = module["main"](tmp_path, dataset, "A")
     assert (tmp_path / "tre_A.png").stat().st_size > 10_000
     assert result["count"] == 25 and at_rest["count"] == 25
+
+
+def test_enrichment_database_built_and_applied_from_python(dataset, tmp_path):
+    physreg.enrich_build(tmp_path / "db.phe", dataset=dataset, positions="A", depths="4,6", grid="16x12x8", coarse_grid="8x6x4", quiet=True)
+    assert (tmp_path / "db.phe").stat().st_size > 0
+    summary = physreg.enrich_apply(tmp_path / "c2f", database=tmp_path / "db.phe", dataset=dataset, state="A", grid="16x12x8", quiet=True)
+    assert summary["tre_against_dataset"]["all"]["count"] == 25
+    assert (tmp_path / "c2f" / "coarse.vtu").exists()
+    with pytest.raises(physreg.Error, match=r"built for another fine mesh"):
+        physreg.enrich_apply(tmp_path / "bad", database=tmp_path / "db.phe", dataset=dataset, state="A", grid="14x12x8", quiet=True)
+    assert not (tmp_path / "bad").exists()
