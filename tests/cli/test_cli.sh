@@ -45,6 +45,15 @@ for f in summary.json report.html params.json enrichment.phe figures/tre.png fig
          registration/D_fine.vtu registration/E_homogeneous.vtu registration/D_landmarks_coarse_to_fine.csv phantom/manifest.json; do
   expect_file "$work/demo/$f"
 done
+# The demo's report.html in headless Chromium: loads, no console message, a non-empty screenshot.
+if command -v chromium >/dev/null; then
+  chromium --headless=new --no-sandbox --disable-gpu --enable-logging=stderr --v=0 --window-size=1200,2400 \
+    --screenshot="$work/demo_report.png" "file://$work/demo/report.html" >/dev/null 2>"$work/chromium.txt"
+  grep -q ':CONSOLE' "$work/chromium.txt" && { failed "demo report.html logs to the console:"; grep ':CONSOLE' "$work/chromium.txt"; } || pass
+  [ "$(stat -c %s "$work/demo_report.png" 2>/dev/null || echo 0)" -gt 50000 ] && pass || failed "demo report.html screenshot missing or blank"
+else
+  echo "SKIPPED: demo report.html in Chromium (Debian package chromium is not installed)"
+fi
 for f in labels.nii.gz tissues.yaml landmarks.csv landmarks.mrk.json landmarks.fcsv mesh_voxels.vtu \
          mesh_fine.vtu mesh_coarse.vtu surfaces_fine.ply boundary_fine.stl tetrahedra_fine.vtu; do
   expect_file "$work/demo/meshing/$f"
