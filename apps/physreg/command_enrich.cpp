@@ -278,7 +278,10 @@ void add_subcommand_enrich(CLI::App& app)
                         {"synthesis_seconds", prediction.synthesis_seconds},
                         {"tre_against_dataset", json::parse(tre_stats_json(tre))},
                         {"files", {{"mesh", "mesh.vtu"}, {"coarse", "coarse.vtu"}, {"landmarks", "landmarks.csv"}, {"displacement", "displacement.nii.gz"}}}};
+        summary["command"] = "enrich apply";
+        summary["inputs"] = {{"database", fs::absolute(a->database).string()}, {"dataset", fs::absolute(a->dataset).string()}, {"state", a->state}};
         write_atomically(staging.path() / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
+        write_html_report(staging.path(), a->output);
         staging.commit();
         std::cerr << fmt::format("enrich apply {} (match {}, {} blended; coarse {:.3f} s, synthesis {:.3f} s): TRE {}\n", a->state, a->match, k,
                                  prediction.coarse_seconds, prediction.synthesis_seconds, tre_line(tre));

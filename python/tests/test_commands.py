@@ -132,7 +132,7 @@ def test_enrichment_database_built_and_applied_from_python(dataset, tmp_path):
     assert (tmp_path / "db.phe").stat().st_size > 0
     summary = physreg.enrich_apply(tmp_path / "c2f", database=tmp_path / "db.phe", dataset=dataset, state="A", grid="16x12x8", quiet=True)
     assert summary["tre_against_dataset"]["all"]["count"] == 25
-    assert (tmp_path / "c2f" / "coarse.vtu").exists()
+    assert (tmp_path / "c2f" / "coarse.vtu").exists() and (tmp_path / "c2f" / "report.html").exists()
     with pytest.raises(physreg.Error, match=r"built for another fine mesh"):
         physreg.enrich_apply(tmp_path / "bad", database=tmp_path / "db.phe", dataset=dataset, state="A", grid="14x12x8", quiet=True)
     assert not (tmp_path / "bad").exists()

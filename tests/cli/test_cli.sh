@@ -366,7 +366,7 @@ expect_error "enrich build: existing database" "use --force" "$physreg" enrich b
   $cg --positions B --depths 3 -o "$work/db.phe"
 expect_ok "enrich apply" "$physreg" --log-level warn enrich apply --database "$work/db.phe" --dataset "$work/ph" --parameters "$work/params.json" \
   --state D -o "$work/c2f_D" --json
-for f in mesh.vtu coarse.vtu landmarks.csv displacement.nii.gz summary.json; do expect_file "$work/c2f_D/$f"; done
+for f in mesh.vtu coarse.vtu landmarks.csv displacement.nii.gz summary.json $html; do expect_file "$work/c2f_D/$f"; done
 expect_ok "enrich apply by field" "$physreg" --log-level warn enrich apply --database "$work/db.phe" --dataset "$work/ph" \
   --parameters "$work/params.json" --state B --match field --blend 2 -o "$work/c2f_B"
 expect_ok "enrich apply outside the range" "$physreg" enrich apply --database "$work/db.phe" --dataset "$work/ph" --parameters "$work/params.json" \
