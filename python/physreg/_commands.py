@@ -67,9 +67,9 @@ def phantom(output, progress=None, **options):
 def simulate(case, output=None, progress=None, **options):
     """Runs a simulation case file (YAML; docs/simulate.md); output overrides the case's folder.
     Returns summary.json (max displacement mm, solver statistics, seconds)."""
+    if output is None:  # checked before the simulation runs, not after
+        raise TypeError("simulate() needs output= (the output folder; it overrides the case file's)")
     run("simulate", case, progress=progress, output=output, **options)
-    if output is None:
-        raise TypeError("simulate(): pass output= to have the summary returned")
     return _summary(Path(output) / "summary.json")
 
 
