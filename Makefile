@@ -5,7 +5,7 @@ BUILD ?= build
 JOBS ?= 2
 CMAKE_FLAGS ?=
 
-.PHONY: deps configure build demo test bench sanitize clean
+.PHONY: deps configure build demo test bench sanitize fuzz clean
 
 deps:
 	@bash scripts/install-deps.sh
@@ -34,5 +34,10 @@ sanitize: deps
 	cd build-asan && ASAN_OPTIONS=detect_leaks=1:fast_unwind_on_malloc=0 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp \
 	  UBSAN_OPTIONS=print_stacktrace=1 ctest --output-on-failure -j$(JOBS)
 
+# libFuzzer targets (clang 14, ASan + UBSan), each run FUZZ_SECONDS on its seed corpus (docs/robustness.md).
+FUZZ_SECONDS ?= 60
+fuzz: deps
+	FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_JOBS=$(JOBS) bash scripts/run-fuzz.sh
+
 clean:
-	rm -rf $(BUILD) build-asan demo-out
+	rm -rf $(BUILD) build-asan build-fuzz demo-out

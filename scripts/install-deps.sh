@@ -27,6 +27,7 @@ packages=(
   chromium                 # tests: report.html loads in a headless browser without console errors
   libgtest-dev libgmock-dev libbenchmark-dev
   calculix-ccx             # tests: an independent nonlinear FE solver to compare Newton with (optional at run time)
+  clang-14 libclang-rt-14-dev libomp-14-dev # fuzzing: libFuzzer, ASan/UBSan runtimes, OpenMP for clang (make fuzz)
 )
 missing=()
 for p in "${packages[@]}"; do

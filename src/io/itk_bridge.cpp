@@ -12,15 +12,20 @@
 #include <itkImageFileWriter.h>
 #include <itkImageIOFactory.h>
 #include <itkImageSeriesReader.h>
+#include <itkMetaImageIO.h>
 #include <itkMetaImageIOFactory.h>
+#include <itkNiftiImageIO.h>
 #include <itkNiftiImageIOFactory.h>
+#include <itkNrrdImageIO.h>
 #include <itkNrrdImageIOFactory.h>
 #include <itkPNGImageIO.h>
 #include <itkRGBPixel.h>
 #include <itkVector.h>
 
 #include <algorithm>
+#include <cctype>
 #include <filesystem>
+#include <fstream>
 
 namespace physreg::detail {
 namespace fs = std::filesystem;
@@ -44,6 +49,77 @@ void require_exists(const std::string& path)
     register_image_formats();
     std::error_code ec;
     if (!fs::exists(path, ec)) fail_missing_file("image '{}': file does not exist", path);
+}
+
+std::string lower(std::string text)
+{
+    std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    return text;
+}
+
+bool ends_with(const std::string& text, const std::string& suffix)
+{
+    return text.size() >= suffix.size() && text.compare(text.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+/// The reader for a file, chosen by its extension. Letting ITK probe every format instead lets a
+/// corrupt .mha be parsed as DICOM, whose reader allocates whatever a damaged length field says
+/// (4 GiB for a 150-byte file, found by fuzzing). Unknown extensions (e.g. DICOM files without
+/// one) are still probed.
+itk::ImageIOBase::Pointer image_io_for(const std::string& path)
+{
+    const std::string name = lower(fs::path(path).filename().string());
+    itk::ImageIOBase::Pointer io;
+    std::string format;
+    if (ends_with(name, ".nii") || ends_with(name, ".nii.gz") || ends_with(name, ".hdr") || ends_with(name, ".img")) {
+        io = itk::NiftiImageIO::New();
+        format = "NIfTI";
+    } else if (ends_with(name, ".nrrd") || ends_with(name, ".nhdr")) {
+        io = itk::NrrdImageIO::New();
+        format = "NRRD";
+    } else if (ends_with(name, ".mha") || ends_with(name, ".mhd")) {
+        io = itk::MetaImageIO::New();
+        format = "MetaImage";
+    } else {
+        io = itk::ImageIOFactory::CreateImageIO(path.c_str(), itk::ImageIOFactory::FileModeEnum::ReadMode);
+        if (!io) fail("image '{}': not a readable image (unknown format, corrupt or truncated header)", path);
+        return io;
+    }
+    if (!io->CanReadFile(path.c_str())) fail("image '{}': not a valid {} file (corrupt or truncated header)", path, format);
+    return io;
+}
+
+/// Refuses a header that declares more pixel data than its file can hold: zlib/gzip compress at
+/// most about 1032:1, so a single-file image (NIfTI, NRRD or MetaImage with its data inside)
+/// declaring more than 1100 × its file size is corrupt. Checked before ITK allocates the buffer.
+void check_declared_size(const std::string& path, const itk::ImageIOBase& io)
+{
+    const std::string name = lower(fs::path(path).filename().string());
+    const bool single_file = ends_with(name, ".nii") || ends_with(name, ".nii.gz") || ends_with(name, ".nrrd") || ends_with(name, ".mha");
+    if (!single_file) return;
+    if (ends_with(name, ".nrrd") || ends_with(name, ".mha")) {
+        // A detached data file ("data file:" in NRRD, ElementDataFile other than LOCAL in MetaImage).
+        std::ifstream in(path, std::ios::binary);
+        std::string head(4096, '\0');
+        in.read(head.data(), static_cast<std::streamsize>(head.size()));
+        head.resize(static_cast<std::size_t>(in.gcount()));
+        const std::string text = lower(head);
+        if (text.find("data file:") != std::string::npos || text.find("datafile:") != std::string::npos) return;
+        const auto element = text.find("elementdatafile");
+        if (element != std::string::npos) {
+            const std::string line = text.substr(element, text.find('\n', element) - element);
+            if (line.find("local") == std::string::npos) return;
+        }
+    }
+    std::error_code ec;
+    const auto file_bytes = fs::file_size(path, ec);
+    if (ec) return;
+    long double declared = static_cast<long double>(io.GetComponentSize()) * io.GetNumberOfComponents();
+    for (unsigned a = 0; a < io.GetNumberOfDimensions(); ++a) declared *= static_cast<long double>(io.GetDimensions(a));
+    if (declared > 1100.0L * static_cast<long double>(file_bytes) + 4096.0L)
+        fail("image '{}': the header declares {:.0f} bytes of pixel data, more than a {}-byte file can hold even compressed "
+             "(corrupt header or truncated file)",
+             path, static_cast<double>(declared), file_bytes);
 }
 
 template <typename ImageType>
@@ -106,12 +182,19 @@ typename ImageType::Pointer read_itk(const std::string& path)
             reader->Update();
             return reader->GetOutput();
         }
+        auto io = image_io_for(path);
+        io->SetFileName(path);
+        io->ReadImageInformation();
+        check_declared_size(path, *io);
         auto reader = itk::ImageFileReader<ImageType>::New();
+        reader->SetImageIO(io);
         reader->SetFileName(path);
         reader->Update();
         return reader->GetOutput();
     } catch (const itk::ExceptionObject& e) {
         fail("image '{}': cannot be read (corrupt or truncated?): {}", path, e.GetDescription());
+    } catch (const std::bad_alloc&) {
+        fail("image '{}': cannot be read: not enough memory for the image its header declares", path);
     }
 }
 
@@ -146,14 +229,14 @@ PlainHeader itk_read_header(const std::string& path)
     require_exists(path);
     const bool directory = fs::is_directory(path);
     const std::string probe = directory ? dicom_series_files(path).front() : path;
-    auto io = itk::ImageIOFactory::CreateImageIO(probe.c_str(), itk::ImageIOFactory::FileModeEnum::ReadMode);
-    if (!io) fail("image '{}': not a readable image (unknown format, corrupt or truncated header)", path);
+    auto io = directory ? itk::ImageIOBase::Pointer(itk::GDCMImageIO::New()) : image_io_for(probe);
     try {
         io->SetFileName(probe);
         io->ReadImageInformation();
     } catch (const itk::ExceptionObject& e) {
         fail("image '{}': cannot read header: {}", path, e.GetDescription());
     }
+    if (!directory) check_declared_size(path, *io);
     PlainHeader h;
     unsigned dims = io->GetNumberOfDimensions();
     // A trailing axis of length 1 (e.g. a 4-D NIfTI with one time point) is still a 3-D image.

@@ -705,7 +705,7 @@ Energies TledSolver<Real>::energies() const
         Mat3 f = Mat3::Identity();
         for (int a = 0; a < npe; ++a) {
             const std::size_t node = static_cast<std::size_t>(conn[npe * e + a]);
-            const Vec3 ua(double(m_u[3 * node]), double(m_u[3 * node + 1]), double(m_u[3 * node + 2]));
+            const Vec3 ua(static_cast<double>(m_u[3 * node]), static_cast<double>(m_u[3 * node + 1]), static_cast<double>(m_u[3 * node + 2]));
             f += ua * Vec3(g.dn_dx[3 * a], g.dn_dx[3 * a + 1], g.dn_dx[3 * a + 2]).transpose();
         }
         out.strain_mj += g.volume_mm3 * strain_energy_density(m_model.options().law, mat, f);

@@ -52,59 +52,69 @@ TissueTable read_tissue_table(const std::filesystem::path& path)
     } catch (const YAML::Exception& e) {
         fail("{}: not valid YAML/JSON: {}", what, e.what());
     }
-    if (!root.IsMap() || !root["tissues"] || !root["tissues"].IsSequence())
-        fail("{}: expected a map with a 'tissues' list", what);
-    const auto keys_of = [](const YAML::Node& map) {
-        std::vector<std::string> keys;
-        for (const auto& entry : map) keys.push_back(entry.first.as<std::string>());
-        return keys;
-    };
-    require_known_keys(keys_of(root), {"tissues", "ignore_labels"}, what, "the table");
-    TissueTable table;
-    std::size_t index = 0;
-    for (const auto& node : root["tissues"]) {
-        const std::string where = fmt::format("{}: tissues[{}]", what, index);
-        if (!node.IsMap()) fail("{}: expected a map (label, name, young_modulus_pa, poisson_ratio, …)", where);
-        auto number = [&](const char* key, std::optional<double> fallback) -> double {
-            if (!node[key]) {
-                if (fallback) return *fallback;
-                fail("{}: missing '{}'", where, key);
+    try {
+        if (!root.IsMap() || !root["tissues"] || !root["tissues"].IsSequence())
+            fail("{}: expected a map with a 'tissues' list", what);
+        const auto keys_of = [&what](const YAML::Node& map) {
+            std::vector<std::string> keys;
+            for (const auto& entry : map) {
+                // A list or map used as a key (`? [a, b]`) is valid YAML but never one of ours.
+                if (!entry.first.IsScalar()) fail("{}: line {}: a key must be a plain name", what, entry.first.Mark().line + 1);
+                keys.push_back(entry.first.Scalar());
             }
-            try {
-                return node[key].as<double>();
-            } catch (const YAML::Exception&) {
-                fail("{}: '{}' is not a number", where, key);
-            }
+            return keys;
         };
-        Tissue t;
-        try {
-            t.label = node["label"].as<std::int32_t>();
-            t.name = node["name"].as<std::string>();
-        } catch (const YAML::Exception&) {
-            fail("{}: needs an integer 'label' and a 'name'", where);
+        require_known_keys(keys_of(root), {"tissues", "ignore_labels"}, what, "the table");
+        TissueTable table;
+        std::size_t index = 0;
+        for (const auto& node : root["tissues"]) {
+            const std::string where = fmt::format("{}: tissues[{}]", what, index);
+            if (!node.IsMap()) fail("{}: expected a map (label, name, young_modulus_pa, poisson_ratio, …)", where);
+            auto number = [&](const char* key, std::optional<double> fallback) -> double {
+                if (!node[key]) {
+                    if (fallback) return *fallback;
+                    fail("{}: missing '{}'", where, key);
+                }
+                try {
+                    return node[key].as<double>();
+                } catch (const YAML::Exception&) {
+                    fail("{}: '{}' is not a number", where, key);
+                }
+            };
+            Tissue t;
+            try {
+                t.label = node["label"].as<std::int32_t>();
+                t.name = node["name"].as<std::string>();
+            } catch (const YAML::Exception&) {
+                fail("{}: needs an integer 'label' and a 'name'", where);
+            }
+            for (const char* legacy : {"E", "young_modulus", "nu", "density"})
+                if (node[legacy])
+                    fail("{}: key '{}' is ambiguous about units; use young_modulus_pa, poisson_ratio, density_kg_m3",
+                         where, legacy);
+            require_known_keys(keys_of(node), {"label", "name", "young_modulus_pa", "poisson_ratio", "density_kg_m3", "mooney_rivlin_c01_fraction"}, what,
+                               fmt::format("tissues[{}]", index));
+            ++index;
+            t.young_modulus_pa = number("young_modulus_pa", std::nullopt);
+            t.poisson_ratio = number("poisson_ratio", std::nullopt);
+            t.density_kg_m3 = number("density_kg_m3", 1000.0);
+            t.mooney_rivlin_c01_fraction = number("mooney_rivlin_c01_fraction", 0.0);
+            table.tissues.push_back(t);
         }
-        for (const char* legacy : {"E", "young_modulus", "nu", "density"})
-            if (node[legacy])
-                fail("{}: key '{}' is ambiguous about units; use young_modulus_pa, poisson_ratio, density_kg_m3",
-                     where, legacy);
-        require_known_keys(keys_of(node), {"label", "name", "young_modulus_pa", "poisson_ratio", "density_kg_m3", "mooney_rivlin_c01_fraction"}, what,
-                           fmt::format("tissues[{}]", index));
-        ++index;
-        t.young_modulus_pa = number("young_modulus_pa", std::nullopt);
-        t.poisson_ratio = number("poisson_ratio", std::nullopt);
-        t.density_kg_m3 = number("density_kg_m3", 1000.0);
-        t.mooney_rivlin_c01_fraction = number("mooney_rivlin_c01_fraction", 0.0);
-        table.tissues.push_back(t);
-    }
-    if (root["ignore_labels"]) {
-        try {
-            for (const auto& l : root["ignore_labels"]) table.ignored_labels.insert(l.as<std::int32_t>());
-        } catch (const YAML::Exception&) {
-            fail("{}: 'ignore_labels' must be a list of integers", what);
+        if (root["ignore_labels"] && !root["ignore_labels"].IsSequence()) fail("{}: 'ignore_labels' must be a list of integers", what);
+        if (root["ignore_labels"]) {
+            try {
+                for (const auto& l : root["ignore_labels"]) table.ignored_labels.insert(l.as<std::int32_t>());
+            } catch (const YAML::Exception&) {
+                fail("{}: 'ignore_labels' must be a list of integers", what);
+            }
         }
+        table.validate(what);
+        return table;
+    } catch (const YAML::Exception& e) {
+        // A structure the checks above did not foresee (e.g. a scalar where a list belongs).
+        fail("{}: line {}: unexpected structure: {}", what, e.mark.line + 1, e.msg);
     }
-    table.validate(what);
-    return table;
 }
 
 void write_tissue_table(const std::filesystem::path& path, const TissueTable& table)
