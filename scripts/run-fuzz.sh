@@ -4,8 +4,9 @@
 # FUZZ_SECONDS on a copy of its committed seed corpus, FUZZ_JOBS targets at a time.
 # Findings (crash-*, leak-*, timeout-*, oom-*) land in build-fuzz/findings/<target>/; a summary
 # (executions, coverage, features, corpus size, findings per target) in build-fuzz/fuzz-summary.json.
-# Exit status 1 when any target found something.
-#   scripts/run-fuzz.sh [TARGET...]     (environment: FUZZ_SECONDS=60 FUZZ_JOBS=2)
+# Exit status 1 when any target found something. FUZZ_KEEP_GOING=1 runs libFuzzer's fork mode with
+# one worker, which goes on after a finding (for long runs: every finding of the run is collected).
+#   scripts/run-fuzz.sh [TARGET...]     (environment: FUZZ_SECONDS=60 FUZZ_JOBS=2 FUZZ_KEEP_GOING=0)
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 build="${FUZZ_BUILD:-$root/build-fuzz}"
@@ -24,17 +25,19 @@ if [ ${#targets[@]} -eq 0 ]; then
 fi
 
 run_one() {
-  local target="$1" build="$2" seconds="$3" root="$4"
+  local target="$1" build="$2" seconds="$3" root="$4" mode=()
+  [ "${FUZZ_KEEP_GOING:-0}" = 1 ] && mode=(-fork=1 -ignore_crashes=1 -ignore_timeouts=1 -ignore_ooms=1)
   local work="$build/corpus/$target" findings="$build/findings/$target"
   rm -rf "$findings"; mkdir -p "$work" "$findings"
   # New inputs go to the working corpus; the committed seeds are read, never written.
   ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=0 LSAN_OPTIONS="suppressions=$root/tests/lsan.supp" \
   UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-    "$build/bin/fuzz_$target" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
+    "$build/bin/fuzz_$target" "${mode[@]}" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
       -artifact_prefix="$findings/" "$work" "$root/fuzz/corpus/$target" > "$build/fuzz_$target.log" 2>&1
   echo "$target exit $?"
 }
 export -f run_one
+export FUZZ_KEEP_GOING
 printf '%s\n' "${targets[@]}" | xargs -P "$jobs" -I{} bash -c 'run_one "$@"' _ {} "$build" "$seconds" "$root" || true
 
 # Summary from libFuzzer's final statistics and its last progress line.
@@ -46,6 +49,9 @@ for t in targets:
     log = (build / f"fuzz_{t}.log").read_text(errors="replace")
     stat = dict(re.findall(r"stat::(\w+):\s+(\d+)", log))
     progress = re.findall(r"#(\d+)\s+\w+\s+cov: (\d+) ft: (\d+) corp: (\d+)/", log)
+    forked = re.findall(r"#(\d+): cov: (\d+) ft: (\d+) corp: (\d+) ", log)  # fork mode
+    if forked:
+        progress, stat["number_of_executed_units"] = forked, forked[-1][0]
     findings = sorted(p.name for p in (build / "findings" / t).iterdir())
     crashed = bool(findings) or "ERROR: libFuzzer" in log or "ERROR: AddressSanitizer" in log or "runtime error" in log
     failed |= crashed

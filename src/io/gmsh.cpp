@@ -20,6 +20,7 @@ namespace {
 struct Tokens {
     std::istream& in;
     std::string what;
+    std::uint64_t file_bytes = 0;
     bool binary = false;
 
     template <typename T>
@@ -51,6 +52,15 @@ struct Tokens {
         while (in >> w)
             if (w == "$End" + section || w == "$END" + section) return;
         fail("{}: section {} is not closed (truncated file)", what, section);
+    }
+    /// A count read from the file, refused when the file is too short to hold that many entries
+    /// (each takes at least one byte): a corrupt count must not size an allocation.
+    template <typename T>
+    T count(const char* item)
+    {
+        const T n = get<T>(item);
+        if (static_cast<std::uint64_t>(n) > file_bytes) fail("{}: {} {} is larger than the file (corrupt file)", what, item, n);
+        return n;
     }
     void skip_line()
     {
@@ -217,7 +227,7 @@ void read_v4(Tokens& t, std::unordered_map<std::int64_t, Vec3>& nodes, std::vect
             t.get<std::int32_t>("entity tag");
             const int parametric = t.get<std::int32_t>("parametric flag");
             if (parametric) fail("{}: parametric node coordinates are not supported", t.what);
-            const Size count = t.get<Size>("block node count");
+            const Size count = t.count<Size>("block node count");
             std::vector<std::int64_t> tags(count);
             for (auto& tag : tags) tag = static_cast<std::int64_t>(t.get<Size>("node tag"));
             for (auto tag : tags) {
@@ -237,7 +247,7 @@ void read_v4(Tokens& t, std::unordered_map<std::int64_t, Vec3>& nodes, std::vect
             const int dim = t.get<std::int32_t>("entity dim");
             const int entity = t.get<std::int32_t>("entity tag");
             const int type = t.get<std::int32_t>("element type");
-            const Size count = t.get<Size>("block element count");
+            const Size count = t.count<Size>("block element count");
             const int nn = gmsh_node_count(type);
             if (nn < 0) fail("{}: unknown element type {}", t.what, type);
             const auto it = volume_physical.find(entity);
@@ -261,7 +271,7 @@ VolumeMesh read_gmsh(const fs::path& path)
     require_existing_file(path, what);
     std::ifstream in(path, std::ios::binary);
     if (!in) fail("{}: cannot open file", what);
-    Tokens t{in, what};
+    Tokens t{in, what, static_cast<std::uint64_t>(fs::file_size(path))};
     std::unordered_map<std::int64_t, Vec3> nodes;
     std::vector<std::int64_t> order;
     std::vector<RawCell> cells;
@@ -284,6 +294,7 @@ VolumeMesh read_gmsh(const fs::path& path)
             int file_type = 0, data_size = 0;
             in >> version >> file_type >> data_size;
             if (!in) fail("{}: corrupt $MeshFormat", what);
+            if (!(version >= 0 && version < 100)) fail("{}: Gmsh format {} is not supported (1, 2.x and 4.1 are)", what, version);
             major = static_cast<int>(version);
             if (major != 2 && !(major == 4 && version >= 4.1 - 1e-9))
                 fail("{}: Gmsh format {} is not supported (1, 2.x and 4.1 are)", what, version);

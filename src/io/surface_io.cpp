@@ -188,8 +188,8 @@ SurfaceMesh read_ply(const fs::path& path, const std::string& what)
             std::vector<std::int32_t> polygon;
             for (const auto& prop : e.properties) {
                 if (prop.list) {
-                    const auto n = static_cast<std::size_t>(ply_value(in, prop.list_count_type, binary, what));
-                    for (std::size_t k = 0; k < n; ++k) polygon.push_back(static_cast<std::int32_t>(ply_value(in, prop.type, binary, what)));
+                    const auto n = to_integer<std::uint32_t>(ply_value(in, prop.list_count_type, binary, what), what, "a list length");
+                    for (std::size_t k = 0; k < n; ++k) polygon.push_back(to_integer<std::int32_t>(ply_value(in, prop.type, binary, what), what, "a vertex index"));
                     continue;
                 }
                 const double v = ply_value(in, prop.type, binary, what);
@@ -200,12 +200,12 @@ SurfaceMesh read_ply(const fs::path& path, const std::string& what)
                     if (prop.name == "nx") normal[0] = v;
                     if (prop.name == "ny") normal[1] = v;
                     if (prop.name == "nz") normal[2] = v;
-                    if (prop.name == "label" || prop.name == "feature") vertex_label = static_cast<std::int32_t>(v);
+                    if (prop.name == "label" || prop.name == "feature") vertex_label = to_integer<std::int32_t>(v, what, "a vertex label");
                 } else if (prop.name == "inside_label") {
-                    label[0] = static_cast<std::int32_t>(v);
+                    label[0] = to_integer<std::int32_t>(v, what, "a face label");
                     has_label = true;
                 } else if (prop.name == "outside_label") {
-                    label[1] = static_cast<std::int32_t>(v);
+                    label[1] = to_integer<std::int32_t>(v, what, "a face label");
                     has_label = true;
                 }
             }
@@ -355,7 +355,7 @@ SurfaceMesh read_vtk_polydata(const fs::path& path, const std::string& what)
             for (std::size_t c = 0; c < n; ++c) {
                 const std::size_t k = count();
                 std::vector<std::int32_t> ids(k);
-                for (auto& id : ids) id = static_cast<std::int32_t>(number());
+                for (auto& id : ids) id = to_integer<std::int32_t>(number(), what, "a point id");
                 if (keyword != "POLYGONS") continue;
                 if (k < 3) fail("{}: polygon {} has {} points", what, c, k);
                 for (std::size_t j = 1; j + 1 < k; ++j) {
@@ -373,7 +373,12 @@ SurfaceMesh read_vtk_polydata(const fs::path& path, const std::string& what)
             std::string name, type;
             in >> name >> type;
             std::getline(in, line); // optional component count
-            const int components = line.find_first_not_of(" \t") == std::string::npos ? 1 : std::stoi(line);
+            int components = 1;
+            if (line.find_first_not_of(" \t\r") != std::string::npos) {
+                std::istringstream count_text(line);
+                if (!(count_text >> components) || components < 1 || components > 4)
+                    fail("{}: SCALARS {}: the component count must be 1 to 4 (got '{}')", what, name, line);
+            }
             in >> keyword;
             if (keyword == "LOOKUP_TABLE") in >> keyword; else fail("{}: SCALARS {} without LOOKUP_TABLE", what, name);
             const bool cells = attribute_of == "CELL_DATA";

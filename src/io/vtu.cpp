@@ -328,7 +328,7 @@ VolumeMesh read_vtu(const fs::path& path, MeshData* data)
     };
     const auto offsets = cell_array("offsets", m);
     const auto types = cell_array("types", m);
-    const auto connectivity = cell_array("connectivity", m ? static_cast<std::size_t>(offsets.back()) : 0);
+    const auto connectivity = cell_array("connectivity", m ? to_integer<std::uint32_t>(offsets.back(), what, "the last cell offset") : 0);
 
     VolumeMesh mesh;
     mesh.nodes.resize(n);
@@ -336,7 +336,7 @@ VolumeMesh read_vtu(const fs::path& path, MeshData* data)
     int volume_type = 0;
     std::vector<std::size_t> kept;
     for (std::size_t c = 0; c < m; ++c) {
-        const int t = static_cast<int>(types[c]);
+        const int t = to_integer<std::uint8_t>(types[c], what, "a cell type");
         if (t == 10 || t == 12) {
             if (volume_type && volume_type != t) fail("{}: mixes tetrahedra and hexahedra (one cell type per mesh)", what);
             volume_type = t;
@@ -350,10 +350,12 @@ VolumeMesh read_vtu(const fs::path& path, MeshData* data)
     mesh.cell_type = volume_type == 12 ? CellType::hexahedron : CellType::tetrahedron;
     const int per = mesh.cell_size();
     for (auto c : kept) {
-        const auto begin = c ? static_cast<std::size_t>(offsets[c - 1]) : 0;
-        if (static_cast<std::size_t>(offsets[c]) - begin != static_cast<std::size_t>(per))
+        const std::size_t begin = c ? to_integer<std::uint32_t>(offsets[c - 1], what, "a cell offset") : 0;
+        const std::size_t end = to_integer<std::uint32_t>(offsets[c], what, "a cell offset");
+        if (end < begin || end - begin != static_cast<std::size_t>(per))
             fail("{}: cell {} has {} nodes, expected {}", what, c, offsets[c] - double(begin), per);
-        for (int v = 0; v < per; ++v) mesh.cells.push_back(static_cast<std::int32_t>(connectivity[begin + v]));
+        if (end > connectivity.size()) fail("{}: cell {} reaches past the connectivity array", what, c);
+        for (int v = 0; v < per; ++v) mesh.cells.push_back(to_integer<std::int32_t>(connectivity[begin + v], what, "a node id"));
     }
     MeshData local;
     for (auto a : piece.child("PointData").children("DataArray")) {
@@ -379,7 +381,7 @@ VolumeMesh read_vtu(const fs::path& path, MeshData* data)
     mesh.cell_labels.assign(kept.size(), 1);
     if (labels) {
         if (labels->components != 1) fail("{}: cell labels '{}' have {} components", what, labels->name, labels->components);
-        for (std::size_t c = 0; c < kept.size(); ++c) mesh.cell_labels[c] = static_cast<std::int32_t>(labels->values[c]);
+        for (std::size_t c = 0; c < kept.size(); ++c) mesh.cell_labels[c] = to_integer<std::int32_t>(labels->values[c], what, "a cell label");
     }
     // The grid a physreg mesh was built on.
     const DataArray* grid_index = local.find_cell("grid_index");
@@ -392,11 +394,13 @@ VolumeMesh read_vtu(const fs::path& path, MeshData* data)
         g.cell_size = Vec3(v[3], v[4], v[5]);
         for (int c = 0; c < 3; ++c)
             for (int r = 0; r < 3; ++r) g.direction(r, c) = v[6 + 3 * c + r];
-        g.dims = {static_cast<std::int64_t>(v[15]), static_cast<std::int64_t>(v[16]), static_cast<std::int64_t>(v[17])};
+        g.dims = {to_integer<std::int32_t>(v[15], what, "physreg_grid dims"), to_integer<std::int32_t>(v[16], what, "physreg_grid dims"),
+                  to_integer<std::int32_t>(v[17], what, "physreg_grid dims")};
         mesh.grid = g;
         for (std::size_t c = 0; c < kept.size(); ++c) {
-            Index3 ijk{static_cast<std::int64_t>(grid_index->values[3 * c]), static_cast<std::int64_t>(grid_index->values[3 * c + 1]),
-                       static_cast<std::int64_t>(grid_index->values[3 * c + 2])};
+            Index3 ijk{to_integer<std::int32_t>(grid_index->values[3 * c], what, "grid_index"),
+                       to_integer<std::int32_t>(grid_index->values[3 * c + 1], what, "grid_index"),
+                       to_integer<std::int32_t>(grid_index->values[3 * c + 2], what, "grid_index")};
             for (int k = 0; k < 3; ++k)
                 if (ijk[k] < 0 || ijk[k] >= g.dims[k]) fail("{}: cell {} grid index out of the grid", what, c);
             mesh.cell_grid_index.push_back(ijk);

@@ -3,6 +3,8 @@
 // Errors: bad input throws physreg::Error naming the item, the value and the reason.
 #include <filesystem>
 #include <fmt/format.h>
+#include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -31,6 +33,20 @@ template <typename... Args>
 [[noreturn]] void fail_missing_file(fmt::format_string<Args...> format, Args&&... args)
 {
     throw MissingFileError(fmt::format(format, std::forward<Args>(args)...));
+}
+
+/// `value` (read from a file as a number) as an integer of type T. Throws Error "<what>: <item>
+/// must be a whole number in [min, max] (got v)" for fractions, NaN/Inf or values out of T's range,
+/// which a plain cast would truncate or turn into undefined behaviour.
+template <typename T>
+T to_integer(double value, const std::string& what, const char* item)
+{
+    constexpr double lowest = static_cast<double>(std::numeric_limits<T>::lowest());
+    constexpr double highest = static_cast<double>(std::numeric_limits<T>::max());
+    // `highest` may round up to 2^63 / 2^64 for 64-bit T, hence < rather than <=.
+    if (!(value >= lowest && value < highest) || value != std::floor(value))
+        fail("{}: {} must be a whole number in [{}, {}] (got {})", what, item, std::numeric_limits<T>::lowest(), std::numeric_limits<T>::max(), value);
+    return static_cast<T>(value);
 }
 
 /// Throws MissingFileError "<what>: file does not exist" unless `path` exists.
