@@ -93,6 +93,38 @@ void check_output_path(const std::filesystem::path& path, const std::string& opt
         fail("{} '{}': directory '{}' does not exist", option, path.string(), dir.string());
 }
 
+void check_distinct_paths(const std::vector<std::pair<std::string, std::string>>& outputs,
+                          const std::vector<std::pair<std::string, std::string>>& inputs)
+{
+    namespace fs = std::filesystem;
+    const auto same = [](const std::string& a, const std::string& b) {
+        return fs::weakly_canonical(fs::absolute(a)) == fs::weakly_canonical(fs::absolute(b));
+    };
+    for (std::size_t i = 0; i < outputs.size(); ++i) {
+        if (outputs[i].second.empty()) continue;
+        for (std::size_t j = i + 1; j < outputs.size(); ++j)
+            if (!outputs[j].second.empty() && same(outputs[i].second, outputs[j].second))
+                fail("{} and {} name the same file '{}': give each output its own path", outputs[i].first, outputs[j].first, outputs[i].second);
+        for (const auto& [option, path] : inputs)
+            if (!path.empty() && same(outputs[i].second, path))
+                fail("{} '{}' is the same file as the input {}: it would be overwritten", outputs[i].first, outputs[i].second, option);
+    }
+}
+
+OutputFiles::~OutputFiles()
+{
+    for (const auto& path : m_written) {
+        std::error_code ignored;
+        std::filesystem::remove(path, ignored);
+    }
+}
+
+void OutputFiles::write(const std::filesystem::path& path, const std::function<void(const std::filesystem::path&)>& write)
+{
+    write(path);
+    m_written.push_back(path);
+}
+
 std::vector<double> parse_number_list(const std::string& text, const std::string& option)
 {
     std::stringstream in(text);

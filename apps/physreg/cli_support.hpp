@@ -3,6 +3,9 @@
 // Shared pieces of the physreg subcommands: JSON summaries, option checks, output paths.
 #include <CLI/CLI.hpp>
 #include <filesystem>
+#include <functional>
+#include <utility>
+#include <vector>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -57,6 +60,26 @@ void set_html_reports(bool enabled);
 
 /// Fails unless the output's directory exists (checked before any work is done).
 void check_output_path(const std::filesystem::path& path, const std::string& option);
+/// Fails when two outputs name the same file, or an output names one of the inputs: `outputs` and
+/// `inputs` are (option, path) pairs; empty paths are skipped.
+void check_distinct_paths(const std::vector<std::pair<std::string, std::string>>& outputs,
+                          const std::vector<std::pair<std::string, std::string>>& inputs = {});
+
+/// The separate output files of one command: if the command fails after writing some of them (a
+/// later write fails, the disk fills, Ctrl-C), those already written are removed, so the outputs
+/// appear all together or not at all.
+class OutputFiles {
+public:
+    OutputFiles() = default;
+    OutputFiles(const OutputFiles&) = delete;
+    OutputFiles& operator=(const OutputFiles&) = delete;
+    ~OutputFiles();
+    /// Calls write(path) (itself atomic) and remembers `path`.
+    void write(const std::filesystem::path& path, const std::function<void(const std::filesystem::path&)>& write);
+    void commit() { m_written.clear(); } ///< all written: keep them
+private:
+    std::vector<std::filesystem::path> m_written;
+};
 
 } // namespace physreg::cli
 

@@ -32,6 +32,7 @@ void add_subcommand_coarsen(CLI::App& app)
     sub->callback([o] {
         check_output_path(o->output, "--output");
         if (!o->embedding.empty()) check_output_path(o->embedding, "--embedding");
+        check_distinct_paths({{"--output", o->output}, {"--embedding", o->embedding}}, {{"MESH", o->input}});
         const Index3 dims = parse_grid_dims(o->grid, "--grid");
         const VolumeMesh fine = read_volume_mesh(o->input);
         const auto result = coarsen(fine, dims, parse_component_policy(o->components));
@@ -41,9 +42,10 @@ void add_subcommand_coarsen(CLI::App& app)
             outside += !e.inside;
             worst = std::max(worst, e.distance_mm);
         }
-        write_volume_mesh(o->output, result.mesh);
+        OutputFiles outputs; // both or neither
+        outputs.write(o->output, [&](const auto& path) { write_volume_mesh(path, result.mesh); });
         if (!o->embedding.empty())
-            write_atomically(o->embedding, [&](const std::filesystem::path& tmp) {
+            outputs.write(o->embedding, [&](const auto& path) { write_atomically(path, [&](const std::filesystem::path& tmp) {
                 std::ofstream out(tmp);
                 out.precision(17);
                 out << "fine_node,coarse_cell,xi,eta,zeta,inside,distance_mm\n";
@@ -54,7 +56,8 @@ void add_subcommand_coarsen(CLI::App& app)
                 }
                 out.close();
                 if (!out) fail("--embedding '{}': write failed", o->embedding);
-            });
+            }); });
+        outputs.commit();
         if (outside)
             logger()->warn("{} of {} fine nodes lie outside the coarse mesh (up to {:.3f} mm); they are embedded "
                            "in the nearest coarse cell with extrapolated natural coordinates",

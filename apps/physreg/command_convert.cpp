@@ -47,6 +47,7 @@ void add_subcommand_convert(CLI::App& app)
     sub->add_flag("--tetrahedra", o->tetrahedra, "Mesh to mesh: split hexahedra into conforming tetrahedra");
     sub->callback([o] {
         check_output_path(o->output, "output");
+        check_distinct_paths({{"OUTPUT", o->output}}, {{"INPUT", o->input}});
         const Kind in = kind_of(o->input), out = kind_of(o->output);
         if (in == Kind::unknown) fail("convert: input '{}' has an unknown extension", o->input);
         if (out == Kind::unknown) fail("convert: output '{}' has an unknown extension", o->output);

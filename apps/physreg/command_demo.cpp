@@ -176,7 +176,11 @@ void add_subcommand_demo(CLI::App& app)
         using clock = std::chrono::steady_clock;
         const auto start = clock::now();
         auto seconds_since = [](clock::time_point t) { return std::chrono::duration<double>(clock::now() - t).count(); };
-        const fs::path dir(o->output);
+        // Everything is written into a staging folder beside OUTPUT that replaces it only when the
+        // demo has finished: an interrupted or failed demo leaves the earlier OUTPUT (or none).
+        const fs::path target(o->output);
+        StagedDirectory staging(target, /*replace=*/true);
+        const fs::path dir = staging.path();
         fs::create_directories(dir / "figures");
         fs::create_directories(dir / "registration");
         const int steps_total = 7;
@@ -202,14 +206,19 @@ void add_subcommand_demo(CLI::App& app)
         phantom_spec.seed = o->seed;
         phantom_spec.validate();
         bool reuse = false;
-        if (!o->rebuild && fs::exists(phantom_dir / "manifest.json")) {
+        const fs::path earlier_phantom = target / "phantom";
+        if (!o->rebuild && fs::exists(earlier_phantom / "manifest.json")) {
             try {
-                const PhantomDataset old = read_phantom_dataset(phantom_dir);
+                const PhantomDataset old = read_phantom_dataset(earlier_phantom);
                 reuse = old.preset == preset && old.seed == o->seed && old.generator_version == VERSION;
             } catch (const Error&) {
                 reuse = false;
             }
-            if (reuse) logger()->info("reusing the phantom dataset of an earlier run in '{}' (--rebuild-phantom makes it anew)", phantom_dir.string());
+            if (reuse) {
+                // Hard links: no copy, and the earlier OUTPUT stays whole if this run fails.
+                fs::copy(earlier_phantom, phantom_dir, fs::copy_options::recursive | fs::copy_options::create_hard_links);
+                logger()->info("reusing the phantom dataset of an earlier run in '{}' (--rebuild-phantom makes it anew)", earlier_phantom.string());
+            }
         }
         double phantom_s = 0.0;
         if (!reuse) {
@@ -411,7 +420,7 @@ void add_subcommand_demo(CLI::App& app)
         text += fmt::format("time: phantom {:.0f} s{}, estimation {:.0f} s, database {:.0f} s, registration {:.0f} s; total {:.0f} s\n", phantom_s,
                             reuse ? " (reused)" : "", estimate_s, database_s, registration_s, total_s);
         text += fmt::format("outputs in '{}': registration/*.vtu (ParaView), figures/*.png, params.json, enrichment.phe, phantom/ (3D Slicer: "
-                            "images, fields, landmarks)\n", dir.string());
+                            "images, fields, landmarks)\n", target.string());
         json summary = {{"preset", preset},
                         {"seed", o->seed},
                         {"methods", table},
@@ -425,7 +434,8 @@ void add_subcommand_demo(CLI::App& app)
                         {"seconds", {{"phantom", phantom_s}, {"phantom_reused", reuse}, {"estimation", estimate_s}, {"database", database_s},
                                      {"registration", registration_s}, {"total", total_s}}}};
         write_atomically(dir / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
-        write_html_report(dir);
+        write_html_report(dir, target);
+        staging.commit();
         if (o->json) std::cout << summary.dump(2) << std::endl;
         else std::cout << text;
     });

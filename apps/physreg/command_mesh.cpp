@@ -41,6 +41,8 @@ void add_subcommand_mesh(CLI::App& app)
         if (!is_volume_mesh_file(o->output)) fail("--output '{}': use a .vtu or .msh file", o->output);
         if (!o->surface.empty()) check_output_path(o->surface, "--surface");
         if (!o->tetrahedra.empty()) check_output_path(o->tetrahedra, "--tetrahedra");
+        check_distinct_paths({{"--output", o->output}, {"--surface", o->surface}, {"--tetrahedra", o->tetrahedra}},
+                             {{"LABELS", o->labels}, {"--tissues", o->tissues}});
         MeshingOptions options;
         if (!o->grid.empty()) options.grid_dims = parse_grid_dims(o->grid, "--grid");
         options.components = parse_component_policy(o->components);
@@ -59,10 +61,12 @@ void add_subcommand_mesh(CLI::App& app)
         bar.update(0.6, "tetrahedra");
         if (!o->tetrahedra.empty()) tets = split_hexahedra_into_tetrahedra(result.mesh);
         bar.update(0.7, "writing");
-        write_volume_mesh(o->output, result.mesh);
-        if (!o->surface.empty()) write_surface(o->surface, surface);
-        if (!o->tetrahedra.empty()) write_volume_mesh(o->tetrahedra, tets);
+        OutputFiles outputs; // all three or none
+        outputs.write(o->output, [&](const auto& path) { write_volume_mesh(path, result.mesh); });
+        if (!o->surface.empty()) outputs.write(o->surface, [&](const auto& path) { write_surface(path, surface); });
+        if (!o->tetrahedra.empty()) outputs.write(o->tetrahedra, [&](const auto& path) { write_volume_mesh(path, tets); });
         bar.update(1.0, "done");
+        outputs.commit();
         bar.finish();
         nlohmann::json summary = mesh_summary(result.mesh, &tissues);
         summary["input"] = {{"file", o->labels}, {"geometry", to_json(volume.geometry)}};

@@ -3,7 +3,9 @@
 #include "app.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/core/interrupt.hpp"
 
+#include <filesystem>
 #include <iostream>
 
 int main(int argc, char** argv)
@@ -11,10 +13,18 @@ int main(int argc, char** argv)
     CLI::App app{"physreg — biomechanical volumetric registration for image-guided surgery.\n"
                  "Coordinates are physical mm in ITK's LPS space."};
     physreg::cli::build_app(app);
+    physreg::install_interrupt_handlers();
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
         return app.exit(e);
+    } catch (const physreg::Interrupted& e) {
+        std::cerr << "physreg: " << e.what() << std::endl;
+        return 128 + e.signal_number(); // the shell's convention for "ended by signal N"
+    } catch (const std::filesystem::filesystem_error& e) {
+        // Disk full, permission denied, … in a file operation without its own message.
+        std::cerr << "physreg: error: " << e.what() << std::endl;
+        return 1;
     } catch (const physreg::Error& e) {
         std::cerr << "physreg: error: " << e.what() << std::endl;
         return 1;

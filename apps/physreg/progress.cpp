@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #include "progress.hpp"
 
+#include "physreg/core/interrupt.hpp"
+
 #include "physreg/core/log.hpp"
 
 #include <algorithm>
@@ -41,6 +43,7 @@ double ProgressDisplay::elapsed_since_start() const
 
 void ProgressDisplay::update(double fraction, const std::string& message)
 {
+    throw_if_interrupted(); // Ctrl-C / kill: stop here; staged outputs are removed on the way out
     fraction = std::clamp(fraction, 0.0, 1.0);
     if (g_sink) {
         if (std::this_thread::get_id() == g_sink_thread) g_sink(m_label, fraction, message);

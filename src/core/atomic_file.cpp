@@ -2,6 +2,7 @@
 #include "physreg/core/atomic_file.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/core/interrupt.hpp"
 
 #include <algorithm>
 #include <atomic>
@@ -35,6 +36,7 @@ void write_atomically(const std::filesystem::path& target,
     const fs::path temporary = dir / fmt::format(".{}.tmp{}-{}{}", stem, ::getpid(), counter++, ext);
     try {
         write(temporary);
+        throw_if_interrupted(); // an interrupted run commits nothing
         std::error_code ec;
         fs::rename(temporary, target, ec);
         if (ec) fail("cannot move '{}' onto '{}': {}", temporary.string(), target.string(), ec.message());
@@ -58,7 +60,8 @@ StagedDirectory::StagedDirectory(const std::filesystem::path& target, bool repla
     if (!fs::is_directory(parent)) fail("cannot write '{}': directory '{}' does not exist", target.string(), parent.string());
     m_path = parent / fmt::format(".{}.partial-{}", target.filename().string(), ::getpid());
     fs::remove_all(m_path, ec);
-    fs::create_directories(m_path);
+    fs::create_directories(m_path, ec);
+    if (ec) fail("cannot write '{}': cannot create a folder in '{}': {}", target.string(), parent.string(), ec.message());
 }
 
 StagedDirectory::~StagedDirectory()
@@ -71,6 +74,7 @@ StagedDirectory::~StagedDirectory()
 void StagedDirectory::commit()
 {
     namespace fs = std::filesystem;
+    throw_if_interrupted(); // an interrupted run commits nothing
     std::error_code ec;
     if (fs::exists(m_target, ec)) {
         const fs::path old = m_path.string() + ".old";

@@ -6,6 +6,7 @@
 #include "physreg/core/log.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <cstring>
 #include <fstream>
 #include <map>
@@ -378,7 +379,7 @@ void write_gmsh(const fs::path& path, const VolumeMesh& mesh, GmshVersion versio
             out << "$EndElements\n";
         }
         out.close();
-        if (!out) fail("'{}': write failed", path.string());
+        if (!out) fail("'{}': write failed: {}", path.string(), std::strerror(errno));
     });
 }
 

@@ -114,6 +114,8 @@ void check_declared_size(const std::string& path, const itk::ImageIOBase& io)
     std::error_code ec;
     const auto file_bytes = fs::file_size(path, ec);
     if (ec) return;
+    if (io.GetComponentType() == itk::IOComponentEnum::UNKNOWNCOMPONENTTYPE)
+        fail("image '{}': unknown or unsupported pixel type (corrupt header?)", path);
     long double declared = static_cast<long double>(io.GetComponentSize()) * io.GetNumberOfComponents();
     for (unsigned a = 0; a < io.GetNumberOfDimensions(); ++a) declared *= static_cast<long double>(io.GetDimensions(a));
     if (declared > 1100.0L * static_cast<long double>(file_bytes) + 4096.0L)
@@ -224,7 +226,9 @@ void write_itk(const std::string& path, const std::string& final_name, const Ima
 
 } // namespace
 
-PlainHeader itk_read_header(const std::string& path)
+namespace {
+
+PlainHeader read_header(const std::string& path)
 {
     require_exists(path);
     const bool directory = fs::is_directory(path);
@@ -261,6 +265,18 @@ PlainHeader itk_read_header(const std::string& path)
         for (unsigned b = 0; b < 3; ++b) h.geometry.direction[3 * b + a] = column[b];
     }
     return h;
+}
+
+} // namespace
+
+PlainHeader itk_read_header(const std::string& path)
+{
+    try {
+        return read_header(path);
+    } catch (const itk::ExceptionObject& e) {
+        // ITK's accessors throw on what a damaged header leaves behind (e.g. an unknown pixel type).
+        fail("image '{}': cannot read header: {}", path, e.GetDescription());
+    }
 }
 
 void itk_read(const std::string& path, PlainGeometry& g, std::vector<std::int32_t>& v)

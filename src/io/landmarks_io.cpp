@@ -4,6 +4,8 @@
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
 
+#include <cerrno>
+#include <cstring>
 #include <algorithm>
 #include <charconv>
 #include <fstream>
@@ -300,7 +302,7 @@ void write_landmarks(const fs::path& path, const LandmarkSet& landmarks)
             fail("landmarks '{}': unknown extension '{}' (use .csv, .fcsv or .mrk.json)", path.string(), ext);
         }
         out.close();
-        if (!out) fail("landmarks '{}': write failed", path.string());
+        if (!out) fail("landmarks '{}': write failed: {}", path.string(), std::strerror(errno));
     });
 }
 

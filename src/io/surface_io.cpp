@@ -5,6 +5,7 @@
 #include "physreg/core/error.hpp"
 
 #include <cmath>
+#include <cerrno>
 #include <cstring>
 #include <fstream>
 #include <map>
@@ -132,6 +133,7 @@ double ply_value(std::istream& in, const std::string& type, bool binary, const s
 
 SurfaceMesh read_ply(const fs::path& path, const std::string& what)
 {
+    const auto file_bytes = static_cast<std::uint64_t>(fs::file_size(path));
     std::ifstream in(path, std::ios::binary);
     std::string line;
     std::getline(in, line);
@@ -150,7 +152,18 @@ SurfaceMesh read_ply(const fs::path& path, const std::string& what)
             else if (format != "ascii") fail("{}: PLY format '{}' is not supported", what, format);
         } else if (key == "element") {
             PlyElement e;
-            s >> e.name >> e.count;
+            std::string count_text;
+            s >> e.name >> count_text;
+            std::size_t used = 0;
+            try {
+                e.count = std::stoull(count_text, &used);
+            } catch (const std::logic_error&) {
+                used = 0;
+            }
+            // Each element takes at least one byte of the file: a larger count is corrupt (and
+            // would loop for hours over elements without properties).
+            if (used == 0 || used != count_text.size() || count_text[0] == '-' || e.count > file_bytes)
+                fail("{}: element '{}' has a bad count '{}' for a {}-byte file", what, e.name, count_text, file_bytes);
             elements.push_back(e);
         } else if (key == "property") {
             if (elements.empty()) fail("{}: property before element", what);
@@ -165,6 +178,7 @@ SurfaceMesh read_ply(const fs::path& path, const std::string& what)
                 s >> p.name;
             }
             if (!ply_size(p.type)) fail("{}: unknown PLY type '{}'", what, p.type);
+            if (p.list && !ply_size(p.list_count_type)) fail("{}: unknown PLY list count type '{}'", what, p.list_count_type);
             elements.back().properties.push_back(p);
         } else if (key == "end_header") {
             break;
@@ -189,6 +203,7 @@ SurfaceMesh read_ply(const fs::path& path, const std::string& what)
             for (const auto& prop : e.properties) {
                 if (prop.list) {
                     const auto n = to_integer<std::uint32_t>(ply_value(in, prop.list_count_type, binary, what), what, "a list length");
+                    if (n > file_bytes) fail("{}: a list of {} values in a {}-byte file (corrupt)", what, n, file_bytes);
                     for (std::size_t k = 0; k < n; ++k) polygon.push_back(to_integer<std::int32_t>(ply_value(in, prop.type, binary, what), what, "a vertex index"));
                     continue;
                 }
@@ -308,6 +323,7 @@ void write_obj(std::ofstream& out, const SurfaceMesh& mesh)
 SurfaceMesh read_vtk_polydata(const fs::path& path, const std::string& what)
 {
     require_existing_file(path, what);
+    const auto file_bytes = static_cast<std::uint64_t>(fs::file_size(path));
     std::ifstream in(path);
     if (!in) fail("{}: cannot open file", what);
     std::string line;
@@ -339,7 +355,9 @@ SurfaceMesh read_vtk_polydata(const fs::path& path, const std::string& what)
     };
     const auto count = [&]() {
         const double v = number();
-        if (!(v >= 0 && v == std::floor(v) && v < 1e9)) fail("{}: bad count {}", what, v);
+        // Each entry takes at least one byte of the file: a larger count is corrupt and must not
+        // size an allocation.
+        if (!(v >= 0 && v == std::floor(v) && v <= static_cast<double>(file_bytes))) fail("{}: bad count {} for a {}-byte file", what, v, file_bytes);
         return static_cast<std::size_t>(v);
     };
     while (in >> keyword) {
@@ -484,7 +502,7 @@ void write_surface(const fs::path& path, const SurfaceMesh& mesh)
         else if (ext == ".vtk") write_vtk_polydata(out, mesh);
         else write_obj(out, mesh);
         out.close();
-        if (!out) fail("surface '{}': write failed", path.string());
+        if (!out) fail("surface '{}': write failed: {}", path.string(), std::strerror(errno));
     });
 }
 

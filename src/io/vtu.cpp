@@ -7,6 +7,7 @@
 #include "detail/base64.hpp"
 
 #include <bit>
+#include <cerrno>
 #include <cstring>
 #include <fstream>
 #include <pugixml.hpp>
@@ -276,7 +277,7 @@ void write_vtu(const fs::path& path, const VolumeMesh& mesh, const MeshData& dat
         write_array(out, "UInt8", "types", 1, types);
         out << "</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n";
         out.close();
-        if (!out) fail("'{}': write failed (disk full?)", path.string());
+        if (!out) fail("'{}': write failed: {}", path.string(), std::strerror(errno));
     });
 }
 

@@ -3,6 +3,8 @@
 
 #include "physreg/core/error.hpp"
 
+#include <cerrno>
+#include <cstring>
 #include <fmt/format.h>
 
 #include <cmath>
@@ -90,7 +92,7 @@ std::vector<double> solve_with_calculix(const VolumeMesh& mesh, const TissueTabl
                 if (loads.constraints[c].dofs[static_cast<std::size_t>(k)])
                     inp << fmt::format("C{}, {}, {}, {:.13g}\n", c, k + 1, k + 1, loads.constraints[c].displacement_mm[k]);
         inp << "*NODE PRINT, NSET=Nall\nU\n*END STEP\n";
-        if (!inp) fail("CalculiX job '{}': cannot write {}", job, inp_path.string());
+        if (!inp) fail("CalculiX job '{}': cannot write {}: {}", job, inp_path.string(), std::strerror(errno));
     }
     const std::filesystem::path log = directory / (job + ".log");
     const std::string command = fmt::format("cd '{}' && OMP_NUM_THREADS={} ccx -i {} > {} 2>&1", directory.string(), run.threads, job,

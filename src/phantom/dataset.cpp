@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/phantom/dataset.hpp"
 
+#include <cerrno>
+#include <cstring>
 #include <omp.h>
 
 #include "physreg/core/atomic_file.hpp"
@@ -517,7 +519,7 @@ void write_text(const fs::path& path, const std::string& text)
     write_atomically(path, [&](const fs::path& tmp) {
         std::ofstream out(tmp);
         out << text;
-        if (!out) fail("cannot write '{}'", path.string());
+        if (!out) fail("cannot write '{}': {}", path.string(), std::strerror(errno));
     });
 }
 

@@ -7,6 +7,8 @@
 #include "physreg/mesh/faces.hpp"
 #include "physreg/phantom/abdominal_phantom.hpp"
 
+#include <cerrno>
+#include <cstring>
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -155,7 +157,7 @@ void write_point_cloud_ply(const std::filesystem::path& path, const LabelledPoin
         for (std::size_t q = 0; q < cloud.points.size(); ++q)
             out << fmt::format("{:.4f} {:.4f} {:.4f} {:.5f} {:.5f} {:.5f} {}\n", cloud.points[q].x(), cloud.points[q].y(),
                                cloud.points[q].z(), cloud.normals[q].x(), cloud.normals[q].y(), cloud.normals[q].z(), cloud.labels[q]);
-        if (!out) fail("cannot write '{}'", path.string());
+        if (!out) fail("cannot write '{}': {}", path.string(), std::strerror(errno));
     });
 }
 
@@ -167,7 +169,7 @@ void write_point_cloud_csv(const std::filesystem::path& path, const LabelledPoin
                "# label: 0 surface, 1 umbilical notch, 2 anterior margin\nx,y,z,label\n";
         for (std::size_t q = 0; q < cloud.points.size(); ++q)
             out << fmt::format("{:.4f},{:.4f},{:.4f},{}\n", cloud.points[q].x(), cloud.points[q].y(), cloud.points[q].z(), cloud.labels[q]);
-        if (!out) fail("cannot write '{}'", path.string());
+        if (!out) fail("cannot write '{}': {}", path.string(), std::strerror(errno));
     });
 }
 
@@ -226,7 +228,7 @@ void write_boundary_ply(const std::filesystem::path& path, const VolumeMesh& mes
         }
         auto slot = [&](std::int32_t n) { return std::lower_bound(boundary.nodes.begin(), boundary.nodes.end(), n) - boundary.nodes.begin(); };
         for (const auto& t : boundary.triangles) out << "3 " << slot(t[0]) << ' ' << slot(t[1]) << ' ' << slot(t[2]) << '\n';
-        if (!out) fail("cannot write '{}'", path.string());
+        if (!out) fail("cannot write '{}': {}", path.string(), std::strerror(errno));
     });
 }
 

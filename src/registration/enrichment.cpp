@@ -4,6 +4,7 @@
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
 
+#include <cerrno>
 #include <Eigen/Dense>
 #include <nlohmann/json.hpp>
 #include <zlib.h>
@@ -170,7 +171,7 @@ void write_enrichment_database(const std::filesystem::path& path, const Enrichme
     write_atomically(path, [&](const std::filesystem::path& tmp) {
         std::ofstream out(tmp, std::ios::binary);
         out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-        if (!out) fail("cannot write enrichment database '{}'", path.string());
+        if (!out) fail("cannot write enrichment database '{}': {}", path.string(), std::strerror(errno));
     });
 }
 

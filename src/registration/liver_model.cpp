@@ -10,6 +10,8 @@
 #include "physreg/mesh/hex_meshing.hpp"
 #include "physreg/mesh/point_location.hpp"
 
+#include <cerrno>
+#include <cstring>
 #include <nlohmann/json.hpp>
 
 #include <chrono>
@@ -75,7 +77,7 @@ void write_model_parameters(const std::filesystem::path& path, const ModelParame
     write_atomically(path, [&](const std::filesystem::path& tmp) {
         std::ofstream out(tmp);
         out << j.dump(2) << "\n";
-        if (!out) fail("cannot write parameter file '{}'", path.string());
+        if (!out) fail("cannot write parameter file '{}': {}", path.string(), std::strerror(errno));
     });
 }
 
