@@ -167,11 +167,24 @@ void verify_nifti(const fs::path& path, bool whole_file)
     if (got >= 348) {
         for (bool swap : {false, true}) {
             const auto sizeof_hdr = get(0, 4, swap);
+            // NIfTI readers take the byte order of the data from dim[0] (valid: 1 to 7), not from
+            // sizeof_hdr: check the floats in the order the reader will use.
+            bool data_swap = swap;
+            if (sizeof_hdr == 348 || (sizeof_hdr == 540 && got >= 540)) {
+                const int dim0_offset = sizeof_hdr == 348 ? 40 : 16, dim0_size = sizeof_hdr == 348 ? 2 : 8;
+                const auto dim0 = get(dim0_offset, dim0_size, swap), dim0_swapped = get(dim0_offset, dim0_size, !swap);
+                if (dim0 >= 1 && dim0 <= 7) data_swap = swap;
+                else if (dim0_swapped >= 1 && dim0_swapped <= 7) data_swap = !swap;
+                else {
+                    gzclose(file);
+                    fail("{}: the NIfTI header's dim[0] is {} (must be 1 to 7): corrupt header", what, dim0);
+                }
+            }
             const auto finite_floats = [&](int offset, int count, int size) {
                 for (int k = 0; k < count; ++k) {
                     unsigned char b[8];
                     std::memcpy(b, header + offset + size * k, static_cast<std::size_t>(size));
-                    if (swap) std::reverse(b, b + size);
+                    if (data_swap) std::reverse(b, b + size);
                     double v;
                     if (size == 4) {
                         float f;
@@ -188,12 +201,12 @@ void verify_nifti(const fs::path& path, bool whole_file)
             std::int64_t qform_code = 0, sform_code = 0;
             if (sizeof_hdr == 348) {
                 finite = finite_floats(76, 8, 4) && finite_floats(256, 18, 4); // pixdim; quatern, qoffset, srow
-                qform_code = get(252, 2, swap);
-                sform_code = get(254, 2, swap);
+                qform_code = get(252, 2, data_swap);
+                sform_code = get(254, 2, data_swap);
             } else if (sizeof_hdr == 540 && got >= 540) {
                 finite = finite_floats(104, 8, 8) && finite_floats(352, 18, 8);
-                qform_code = get(344, 4, swap);
-                sform_code = get(348, 4, swap);
+                qform_code = get(344, 4, data_swap);
+                sform_code = get(348, 4, data_swap);
             } else {
                 if (swap) {
                     gzclose(file);
@@ -211,7 +224,7 @@ void verify_nifti(const fs::path& path, bool whole_file)
         }
     } else if (got >= 0) {
         gzclose(file);
-        fail("{}: {} bytes: too short for a NIfTI header (348 bytes)", what, got);
+        fail("{}: {} bytes: too short for a NIfTI header of 348 bytes (truncated, or not NIfTI)", what, got);
     }
     if (!whole_file) {
         gzclose(file);
