@@ -32,7 +32,9 @@ case_() {
     plain) "$physreg" "$@" </dev/null >"$work/out.txt" 2>"$work/err.txt"; status=$? ;;
     readonly)
       if [ "$(id -u)" -eq 0 ]; then
-        setpriv --reuid=65534 --regid=65534 --clear-groups "$physreg" "$@" </dev/null >"$work/out.txt" 2>"$work/err.txt"; status=$?
+        # The copies under $work/unprivileged: the build tree may sit in a folder nobody cannot enter.
+        LD_LIBRARY_PATH="$work/unprivileged/lib" setpriv --reuid=65534 --regid=65534 --clear-groups \
+          "$work/unprivileged/bin/physreg" "$@" </dev/null >"$work/out.txt" 2>"$work/err.txt"; status=$?
       else
         "$physreg" "$@" </dev/null >"$work/out.txt" 2>"$work/err.txt"; status=$?
       fi ;;
@@ -69,6 +71,13 @@ case_() {
 }
 
 W="$work"
+if [ "$(id -u)" -eq 0 ]; then # a copy of the program and its library that user nobody can run
+  mkdir -p "$work/unprivileged/bin" "$work/unprivileged/lib"
+  cp "$physreg" "$work/unprivileged/bin/"
+  lib="$(ldd "$physreg" | sed -n 's/.*libphysreg[^ ]* => \(.*\) (.*/\1/p')"
+  [ -n "$lib" ] && cp -L "$lib" "$work/unprivileged/lib/"
+  chmod -R a+rX "$work/unprivileged"
+fi
 # ---------------------------------------------------------------- valid fixtures to damage
 "$physreg" -q phantom --preset small --seed 3 --depths 8,10,8,6 -o "$W/ph" >/dev/null 2>&1 || { echo "fixture: phantom failed"; exit 1; }
 ph="$W/ph"
