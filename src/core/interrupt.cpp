@@ -4,6 +4,7 @@
 #include <atomic>
 #include <csignal>
 #include <cstring>
+#include <omp.h>
 #include <thread>
 
 namespace physreg {
@@ -35,7 +36,10 @@ int interrupt_signal() { return g_signal; }
 void throw_if_interrupted()
 {
     const int s = g_signal;
-    if (s == 0 || !g_installed || std::this_thread::get_id() != g_main_thread) return;
+    // Never inside an OpenMP parallel region (progress is reported from some of them, on the master
+    // thread): an exception leaving a region terminates the process. The next serial progress
+    // update or output commit stops the command instead.
+    if (s == 0 || !g_installed || std::this_thread::get_id() != g_main_thread || omp_in_parallel()) return;
     throw Interrupted(s, fmt::format("interrupted by {} ({}); no output was written", sigabbrev_np(s) ? std::string("SIG") + sigabbrev_np(s) : "a signal",
                                      strsignal(s)));
 }

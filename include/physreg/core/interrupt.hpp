@@ -23,7 +23,7 @@ void install_interrupt_handlers();
 /// The signal received, or 0.
 int interrupt_signal();
 /// Throws Interrupted when a signal has arrived; only on the thread that installed the handlers
-/// (worker threads must not throw through OpenMP regions), a no-op elsewhere.
+/// and outside OpenMP parallel regions (an exception must not cross one), a no-op elsewhere.
 void throw_if_interrupted();
 
 } // namespace physreg
