@@ -5,29 +5,50 @@
 #include <csignal>
 #include <cstring>
 #include <omp.h>
+#include <pthread.h>
 #include <thread>
 
 namespace physreg {
 namespace {
 
-volatile std::sig_atomic_t g_signal = 0;
+std::atomic<int> g_signal{0};
 std::atomic<bool> g_installed{false};
 std::thread::id g_main_thread;
 
-extern "C" void on_signal(int signal_number)
-{
-    g_signal = signal_number;
-    std::signal(signal_number, SIG_DFL); // a second one ends the process at once
-}
-
 } // namespace
 
+// The signals are blocked in every thread and taken by one watcher thread with sigwait(), not by a
+// handler: libraries install handlers of their own (METIS/GKlib sets a SIGTERM handler that
+// longjmps, and leaves it behind when called from several threads; a SIGTERM then crashed the
+// process), and a blocked signal never reaches them.
 void install_interrupt_handlers()
 {
     g_main_thread = std::this_thread::get_id();
-    for (int s : {SIGINT, SIGTERM, SIGHUP})
-        if (std::signal(s, on_signal) == SIG_IGN) std::signal(s, SIG_IGN); // ignored by our parent (nohup, `&`): keep it so
     std::signal(SIGXFSZ, SIG_IGN);
+    sigset_t watched;
+    sigemptyset(&watched);
+    for (int s : {SIGINT, SIGTERM, SIGHUP}) {
+        struct sigaction current {};
+        sigaction(s, nullptr, &current);
+        if (current.sa_handler != SIG_IGN) sigaddset(&watched, s); // ignored by our parent (nohup, `&`): keep it so
+    }
+    // Before any other thread exists, so that every thread (OpenMP, ITK, MPI) inherits the mask.
+    pthread_sigmask(SIG_BLOCK, &watched, nullptr);
+    std::thread([watched] {
+        for (;;) {
+            int s = 0;
+            if (sigwait(&watched, &s) != 0) continue;
+            if (g_signal.exchange(s) != 0) {
+                // A second signal: end the process now, as the signal's default action would.
+                std::signal(s, SIG_DFL);
+                sigset_t one;
+                sigemptyset(&one);
+                sigaddset(&one, s);
+                pthread_sigmask(SIG_UNBLOCK, &one, nullptr);
+                raise(s);
+            }
+        }
+    }).detach();
     g_installed = true;
 }
 

@@ -1,9 +1,9 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
-// Ctrl-C and `kill`: the first SIGINT/SIGTERM/SIGHUP only raises a flag; the running command sees it
-// at its next progress update or output commit, throws Interrupted, and the staged outputs are
-// removed on the way out, so an interrupted run leaves no partial output. A second signal ends
-// the process at once (the default action).
+// Ctrl-C and `kill`: the first SIGINT/SIGTERM/SIGHUP only raises a flag (a watcher thread takes
+// it); the running command sees it at its next progress update or output commit, throws
+// Interrupted, and the staged outputs are removed on the way out, so an interrupted run leaves no
+// partial output. A second signal ends the process at once (the default action).
 #include "physreg/core/error.hpp"
 
 namespace physreg {
@@ -16,7 +16,8 @@ private:
     int m_signal;
 };
 
-/// Installs the handlers (the program calls this once, from its main thread). Also ignores
+/// Blocks the signals in every thread and starts the watcher thread (the program calls this once,
+/// from its main thread, before any other thread starts). Also ignores
 /// SIGXFSZ, so that a file-size limit makes writes fail with an error instead of killing the
 /// process halfway through a file.
 void install_interrupt_handlers();
