@@ -184,7 +184,7 @@ case_ register-compression-garbage register-compression "parameter file that is 
 case_ register-compression-state register-compression "unknown state" "Z" 1 "$o" -- register-compression --dataset "$ph" --grid 36x27x12 --state Z -o "$o"
 case_ register-compression-overlap register-compression "output = the dataset folder" "not empty" 1 "" -- register-compression --dataset "$ph" --grid 36x27x12 --state D -o "$ph"
 case_ register-compression-full-disk register-compression "disk full (file size limit 64 KB)" "File too large" 1 "$o" fsize:64 -- register-compression --dataset "$ph" --grid 36x27x12 --state D -o "$o"
-case_ register-compression-sigterm register-compression "SIGTERM mid-run" "interrupted by SIGTERM" 143 "$o" signal:TERM:2 -- register-compression --dataset "$ph" --grid 36x27x12 --state D -o "$o"
+case_ register-compression-sigterm register-compression "SIGTERM mid-run" "interrupted by SIGTERM" 143 "$o" signal:TERM:0.5 -- register-compression --dataset "$ph" --grid 36x27x12 --state D -o "$o"
 case_ register-surface-cloud register-surface "point cloud with NaN" "cloud_nan.csv" 1 "$o" -- register-surface --model "$W/tets.vtu" --cloud "$W/cloud_nan.csv" -o "$o"
 case_ register-surface-visible register-surface "--visible 77 (not in the dataset)" "77" 1 "$o" -- register-surface --dataset "$ph" --visible 77 -o "$o"
 case_ register-surface-readonly register-surface "read-only output folder" "ro" 1 "$W/ro/rs" readonly -- register-surface --dataset "$ph" --visible 50 -o "$W/ro/rs"
