@@ -67,6 +67,9 @@ void verify_metaimage(const fs::path& path)
     std::vector<std::string> sizes;
     bool element_type = false, data_file = false;
     std::size_t read = 0;
+    const auto positive_integer = [](const std::string& t) {
+        return !t.empty() && t.size() <= 9 && std::all_of(t.begin(), t.end(), [](unsigned char c) { return std::isdigit(c); }) && std::stol(t) > 0;
+    };
     while (!data_file && std::getline(in, line)) {
         ++number;
         read += line.size() + 1;
@@ -87,9 +90,6 @@ void verify_metaimage(const fs::path& path)
             fail("{}: MetaImage header line {} is not 'Key = Value' (plain key, printable value of at most 255 characters)", what, number);
         std::istringstream words(value);
         std::vector<std::string> tokens{std::istream_iterator<std::string>(words), std::istream_iterator<std::string>()};
-        const auto positive_integer = [](const std::string& t) {
-            return !t.empty() && t.size() <= 9 && std::all_of(t.begin(), t.end(), [](unsigned char c) { return std::isdigit(c); }) && std::stol(t) > 0;
-        };
         if (key == "NDims") {
             if (tokens.size() != 1 || !positive_integer(tokens[0]) || std::stol(tokens[0]) > 4) fail("{}: MetaImage NDims '{}' (1 to 4)", what, value);
             dimensions = static_cast<int>(std::stol(tokens[0]));
@@ -111,9 +111,7 @@ void verify_metaimage(const fs::path& path)
     }
     if (!data_file) fail("{}: MetaImage header without ElementDataFile (truncated?)", what);
     if (dimensions == 0 || sizes.size() != static_cast<std::size_t>(dimensions) ||
-        !std::all_of(sizes.begin(), sizes.end(), [](const std::string& t) {
-            return !t.empty() && t.size() <= 9 && std::all_of(t.begin(), t.end(), [](unsigned char c) { return std::isdigit(c); }) && std::stol(t) > 0;
-        }))
+        !std::all_of(sizes.begin(), sizes.end(), positive_integer))
         fail("{}: MetaImage header needs NDims and DimSize with NDims positive sizes", what);
     if (!element_type) fail("{}: MetaImage header without ElementType", what);
 }
