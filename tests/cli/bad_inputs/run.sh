@@ -46,6 +46,15 @@ case_() {
       # installs its handler as it would under an interactive shell.
       env --default-signal=INT,TERM "$physreg" "$@" </dev/null >"$work/out.txt" 2>"$work/err.txt" &
       local pid=$!
+      # The delay counts from the moment the program has taken the signal over (blocked it for its
+      # watcher thread, as /proc shows): loading a sanitizer build's libraries can take longer
+      # than the delay, and a signal before main() would simply kill it.
+      local number mask tries=0
+      number=$(kill -l "$name")
+      while mask=$(sed -n 's/^SigBlk:[[:space:]]*//p' "/proc/$pid/status" 2>/dev/null) && [ -n "$mask" ] &&
+            (( ((0x$mask >> (number - 1)) & 1) == 0 && tries < 600 )); do
+        sleep 0.1; tries=$((tries + 1))
+      done
       sleep "$delay"; kill -s "$name" "$pid" 2>/dev/null
       wait "$pid"; status=$? ;;
   esac
