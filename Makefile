@@ -29,10 +29,12 @@ bench: build
 
 # The test suite under AddressSanitizer + UndefinedBehaviorSanitizer. SANITIZE_EXCLUDE: a ctest
 # regex of tests to leave out (CI leaves out the two longest end-to-end runs, which the Release
-# suite covers).
+# suite covers). -O1 -g1 (line tables for the reports' stacks), as ASan's authors advise: it builds
+# in about half the time of -O2 -g (a 250 MB library instead of 630 MB); the tests run ~20 % slower.
 SANITIZE_EXCLUDE ?=
 sanitize: deps
-	@cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPHYSREG_SANITIZE=ON -DPHYSREG_BUILD_BENCHMARKS=OFF >/dev/null
+	@cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO='-O1 -g1 -DNDEBUG' \
+	  -DCMAKE_C_FLAGS_RELWITHDEBINFO='-O1 -g1 -DNDEBUG' -DPHYSREG_SANITIZE=ON -DPHYSREG_BUILD_BENCHMARKS=OFF >/dev/null
 	@cmake --build build-asan -j$(JOBS)
 	cd build-asan && ASAN_OPTIONS=detect_leaks=1:fast_unwind_on_malloc=0 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp \
 	  UBSAN_OPTIONS=print_stacktrace=1 ctest --output-on-failure -j$(JOBS) $(if $(SANITIZE_EXCLUDE),-E '$(SANITIZE_EXCLUDE)')
