@@ -5,6 +5,7 @@
 
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
+#include "physreg/core/subprocess.hpp"
 
 #include <cstdlib>
 #include <optional>
@@ -190,7 +191,7 @@ void write_html_report(const std::filesystem::path& folder, const std::filesyste
     const std::string command = "PYTHONPATH=" + shell_quote(root->string()) + " OMP_NUM_THREADS=1 " + python + " -m physreg.report " +
                                 shell_quote(folder.string()) +
                                 (shown_as.empty() ? std::string() : " --shown-as " + shell_quote(std::filesystem::absolute(shown_as).string())) + " >/dev/null";
-    const int status = std::system(command.c_str());
+    const int status = run_shell_command(command);
     if (status != 0) {
         const int code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
         logger()->warn("report.html not written: '{} -m physreg.report' failed (exit status {}; its message is above; is python3-matplotlib "

@@ -26,6 +26,10 @@ int main(int argc, char** argv)
         std::cerr << "physreg: error: " << e.what() << std::endl;
         return 1;
     } catch (const physreg::Error& e) {
+        if (const int s = physreg::interrupt_signal(); s != 0) { // the error came from the interruption (a child program stopped by it)
+            std::cerr << "physreg: " << physreg::interruption_message(s) << " (" << e.what() << ")" << std::endl;
+            return 128 + s;
+        }
         std::cerr << "physreg: error: " << e.what() << std::endl;
         return 1;
     } catch (const std::exception& e) {

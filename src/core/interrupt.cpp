@@ -61,8 +61,13 @@ void throw_if_interrupted()
     // thread): an exception leaving a region terminates the process. The next serial progress
     // update or output commit stops the command instead.
     if (s == 0 || !g_installed || std::this_thread::get_id() != g_main_thread || omp_in_parallel()) return;
-    throw Interrupted(s, fmt::format("interrupted by {} ({}); no output was written", sigabbrev_np(s) ? std::string("SIG") + sigabbrev_np(s) : "a signal",
-                                     strsignal(s)));
+    throw Interrupted(s, interruption_message(s));
+}
+
+std::string interruption_message(int signal_number)
+{
+    const char* name = sigabbrev_np(signal_number);
+    return fmt::format("interrupted by {} ({}); no output was written", name ? std::string("SIG") + name : "a signal", strsignal(signal_number));
 }
 
 } // namespace physreg

@@ -2,6 +2,7 @@
 #include "physreg/mechanics/calculix.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/core/subprocess.hpp"
 
 #include <cerrno>
 #include <cstring>
@@ -16,7 +17,7 @@ namespace physreg {
 
 bool calculix_available()
 {
-    return std::system("command -v ccx > /dev/null 2>&1") == 0;
+    return run_shell_command("command -v ccx > /dev/null 2>&1") == 0;
 }
 
 namespace {
@@ -97,7 +98,7 @@ std::vector<double> solve_with_calculix(const VolumeMesh& mesh, const TissueTabl
     const std::filesystem::path log = directory / (job + ".log");
     const std::string command = fmt::format("cd '{}' && OMP_NUM_THREADS={} ccx -i {} > {} 2>&1", directory.string(), run.threads, job,
                                             log.filename().string());
-    if (std::system(command.c_str()) != 0) {
+    if (run_shell_command(command) != 0) {
         // The log's last lines say why (the folder may be a scratch one that disappears).
         std::ifstream in(log);
         std::vector<std::string> lines;

@@ -26,5 +26,7 @@ int interrupt_signal();
 /// Throws Interrupted when a signal has arrived; only on the thread that installed the handlers
 /// and outside OpenMP parallel regions (an exception must not cross one), a no-op elsewhere.
 void throw_if_interrupted();
+/// "interrupted by SIGTERM (Terminated); no output was written".
+std::string interruption_message(int signal_number);
 
 } // namespace physreg
