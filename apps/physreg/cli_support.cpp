@@ -132,13 +132,9 @@ std::vector<double> parse_number_list(const std::string& text, const std::string
     std::string item;
     std::vector<double> v;
     while (std::getline(in, item, ',')) {
-        try {
-            std::size_t used = 0;
-            v.push_back(std::stod(item, &used));
-            if (used != item.size()) throw std::invalid_argument(item);
-        } catch (const std::logic_error&) {
-            fail("{}: '{}' is not a number", option, item);
-        }
+        const auto value = parse_number(item);
+        if (!value) fail("{}: '{}' is not a number", option, item);
+        v.push_back(*value);
     }
     if (v.empty()) fail("{}: empty list", option);
     return v;

@@ -45,8 +45,9 @@ void add_subcommand_estimate(CLI::App& app)
     add_model_options(sub, o->model);
     sub->add_flag("--fit-moduli", o->fit_moduli, "Also fit the tumour and vessel Young's moduli (log-scaled, 1e4 … 1e8 Pa)");
     sub->add_option("--k-bounds", [o](const std::vector<std::string>& v) {
-        if (v.size() != 2) return false;
-        o->k_min = std::stod(v[0]), o->k_max = std::stod(v[1]);
+        const auto low = v.size() == 2 ? parse_number(v[0]) : std::nullopt, high = v.size() == 2 ? parse_number(v[1]) : std::nullopt;
+        if (!low || !high) return false; // CLI11 reports "--k-bounds: … is not a valid value"
+        o->k_min = *low, o->k_max = *high;
         return true;
     }, "Bounds of the coupling stiffnesses, N/m (default 1 1e5)")->expected(2);
     sub->add_option("--optimizer", o->algorithm, "bobyqa (default) or neldermead (NLopt)");

@@ -110,14 +110,9 @@ int blend_size(const std::string& text, const EnrichmentDatabase& db, const Live
                const LiverModel& fine, std::vector<double>* loo_mm)
 {
     if (text == "auto") return choose_blend_size(db, coarse.mesh, fine_nodes, fine.mesh.nodes, 4, loo_mm);
-    int k = 0;
-    try {
-        std::size_t used = 0;
-        k = std::stoi(text, &used);
-        if (used != text.size()) throw std::invalid_argument(text);
-    } catch (const std::logic_error&) {
-        fail("--blend: '{}' is neither auto nor a number", text);
-    }
+    const auto number = parse_number(text);
+    if (!number) fail("--blend: '{}' is neither auto nor a number", text);
+    const int k = to_integer<int>(*number, "--blend", "the number of blended database entries");
     if (k < 1) fail("--blend must be ≥ 1 (got {})", k);
     return k;
 }

@@ -3,6 +3,17 @@
 
 namespace physreg {
 
+std::optional<double> parse_number(const std::string& text)
+{
+    try {
+        std::size_t used = 0;
+        const double value = std::stod(text, &used);
+        if (used == text.size()) return value;
+    } catch (const std::logic_error&) { // invalid_argument, out_of_range
+    }
+    return std::nullopt;
+}
+
 void require_existing_file(const std::filesystem::path& path, const std::string& what)
 {
     std::error_code ec;

@@ -344,14 +344,9 @@ SurfaceMesh read_vtk_polydata(const fs::path& path, const std::string& what)
     const auto number = [&]() {
         std::string token;
         if (!(in >> token)) fail("{}: truncated file", what);
-        try {
-            std::size_t used = 0;
-            const double v = std::stod(token, &used);
-            if (used != token.size()) throw std::invalid_argument(token);
-            return v;
-        } catch (const std::logic_error&) {
-            fail("{}: '{}' is not a number", what, token);
-        }
+        const auto v = parse_number(token);
+        if (!v) fail("{}: '{}' is not a number", what, token);
+        return *v;
     };
     const auto count = [&]() {
         const double v = number();

@@ -25,16 +25,11 @@ Mat3 cross_matrix(const Vec3& a)
     return m;
 }
 
-double parse_number(const std::string& text, const std::string& what, int line)
+double finite_number(const std::string& text, const std::string& what, int line)
 {
-    try {
-        std::size_t used = 0;
-        const double v = std::stod(text, &used);
-        if (used != text.size() || !std::isfinite(v)) throw std::invalid_argument(text);
-        return v;
-    } catch (const std::logic_error&) {
-        fail("{}: line {}: '{}' is not a finite number", what, line, text);
-    }
+    const auto v = parse_number(text);
+    if (!v || !std::isfinite(*v)) fail("{}: line {}: '{}' is not a finite number", what, line, text);
+    return *v;
 }
 
 } // namespace
@@ -75,9 +70,9 @@ std::vector<VesselBranch> read_vessel_centrelines(const std::filesystem::path& p
             for (std::string item; std::getline(s, item, ',');) items.push_back(item);
             if (items.size() != 5) fail("{}: line {}: expected 5 values branch,x,y,z,radius", what, number);
             if (items[0] != current_id) close(), current_id = items[0];
-            branch.points.emplace_back(scale * parse_number(items[1], what, number), scale * parse_number(items[2], what, number),
-                                       scale * parse_number(items[3], what, number));
-            const double r = scale * parse_number(items[4], what, number);
+            branch.points.emplace_back(scale * finite_number(items[1], what, number), scale * finite_number(items[2], what, number),
+                                       scale * finite_number(items[3], what, number));
+            const double r = scale * finite_number(items[4], what, number);
             if (!(r > 0)) fail("{}: line {}: radius {} must be > 0", what, number, r);
             branch.radii_mm.push_back(r);
         } else {
@@ -89,8 +84,8 @@ std::vector<VesselBranch> read_vessel_centrelines(const std::filesystem::path& p
                 continue;
             }
             if (items.size() != 3) fail("{}: line {}: expected 'x y z'", what, number);
-            branch.points.emplace_back(scale * parse_number(items[0], what, number), scale * parse_number(items[1], what, number),
-                                       scale * parse_number(items[2], what, number));
+            branch.points.emplace_back(scale * finite_number(items[0], what, number), scale * finite_number(items[1], what, number),
+                                       scale * finite_number(items[2], what, number));
             branch.radii_mm.push_back(default_radius_mm);
         }
     }

@@ -891,8 +891,12 @@ PhantomDataset read_phantom_dataset(const fs::path& directory)
             state.name = s.at("name").get<std::string>();
             state.kind = s.at("kind").get<std::string>();
             state.files = s.at("files").get<std::map<std::string, std::string>>();
-            for (const auto& [percent, entry] : s.at("partial_surfaces").items())
-                state.surfaces[std::stoi(percent)] = {entry.at("ply").get<std::string>(), entry.at("csv").get<std::string>()};
+            for (const auto& [percent, entry] : s.at("partial_surfaces").items()) {
+                const auto number = parse_number(percent);
+                if (!number) fail("dataset manifest '{}': state {}: partial surface key '{}' is not a percentage", path.string(), state.name, percent);
+                state.surfaces[to_integer<int>(*number, "dataset manifest '" + path.string() + "'", "a partial surface's percentage")] = {
+                    entry.at("ply").get<std::string>(), entry.at("csv").get<std::string>()};
+            }
             state.max_displacement_mm = s.value("max_displacement_mm", 0.0);
             state.depth_mm = s.value("depth_mm", 0.0);
             if (s.contains("tool")) {

@@ -194,13 +194,9 @@ LabelledPointCloud read_point_cloud_csv(const std::filesystem::path& path)
         std::string item;
         std::vector<double> values;
         while (std::getline(fields, item, ',')) {
-            try {
-                std::size_t used = 0;
-                values.push_back(std::stod(item, &used));
-                if (used != item.size()) throw std::invalid_argument(item);
-            } catch (const std::logic_error&) {
-                fail("point cloud '{}': line {}: '{}' is not a number", path.string(), line_number, item);
-            }
+            const auto value = parse_number(item);
+            if (!value) fail("point cloud '{}': line {}: '{}' is not a number", path.string(), line_number, item);
+            values.push_back(*value);
         }
         if (values.size() != 4 || !std::isfinite(values[0]) || !std::isfinite(values[1]) || !std::isfinite(values[2]))
             fail("point cloud '{}': line {}: expected 4 finite values x,y,z,label", path.string(), line_number);

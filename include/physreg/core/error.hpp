@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -48,6 +49,10 @@ T to_integer(double value, const std::string& what, const char* item)
         fail("{}: {} must be a whole number in [{}, {}] (got {})", what, item, std::numeric_limits<T>::lowest(), std::numeric_limits<T>::max(), value);
     return static_cast<T>(value);
 }
+
+/// The whole of `text` as a number, as std::stod reads it (NaN and Inf included: callers decide), or
+/// nothing when it is not a number or has anything after the number.
+std::optional<double> parse_number(const std::string& text);
 
 /// Throws MissingFileError "<what>: file does not exist" unless `path` exists.
 void require_existing_file(const std::filesystem::path& path, const std::string& what);

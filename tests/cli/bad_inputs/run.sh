@@ -133,6 +133,14 @@ cp "$W/db.phe" "$W/flipped.phe"; printf '\xff' | dd of="$W/flipped.phe" bs=1 see
 head -c 1000 "$W/db.phe" > "$W/truncated.phe"
 cp -r "$ph" "$W/ph_nolabels"; rm "$W/ph_nolabels/rest/labels.nii.gz"
 cp -r "$ph" "$W/ph_badmanifest"; printf '{"version": 1, "states": [' > "$W/ph_badmanifest/manifest.json"
+cp -r "$ph" "$W/ph_badpercent" # a partial surface listed under "ten" instead of a percentage
+python3 - "$W/ph_badpercent/manifest.json" <<'PY'
+import json, sys
+m = json.load(open(sys.argv[1]))
+state = next(s for s in m["states"] if s["partial_surfaces"])
+state["partial_surfaces"]["ten"] = state["partial_surfaces"].pop(next(iter(state["partial_surfaces"])))
+json.dump(m, open(sys.argv[1], "w"))
+PY
 cat > "$W/params_negative.json" <<'JSON'
 {"format": "physreg-model-parameters", "format_version": 1, "variant": "coupled",
  "coupling_stiffness_n_per_m": {"parenchyma_tumour": -3, "parenchyma_vessel": 500},
@@ -187,6 +195,8 @@ case_ phantom-sigterm phantom "SIGTERM after 3 s" "interrupted by SIGTERM" 143 "
 case_ phantom-sigint phantom "SIGINT (Ctrl-C) after 3 s" "interrupted by SIGINT" 130 "$o" signal:INT:3 -- phantom --preset small -o "$o"
 case_ estimate-no-labels estimate "dataset without its rest labels" "labels.nii.gz" 1 "$o.json" -- estimate --dataset "$W/ph_nolabels" -o "$o.json"
 case_ estimate-manifest estimate "dataset with a truncated manifest.json" "manifest.json" 1 "$o.json" -- estimate --dataset "$W/ph_badmanifest" -o "$o.json"
+case_ estimate-manifest-key estimate "manifest.json with a partial surface under 'ten'" "'ten' is not a percentage" 1 "$o.json" -- estimate --dataset "$W/ph_badpercent" -o "$o.json"
+case_ estimate-k-bounds estimate "--k-bounds abc 5" "Could not convert: --k-bounds" 104 "$o.json" -- estimate --dataset "$ph" --k-bounds abc 5 -o "$o.json"
 case_ register-compression-params register-compression "parameter file with negative stiffness" "params_negative.json" 1 "$o" -- register-compression --dataset "$ph" --grid 36x27x12 --state D --parameters "$W/params_negative.json" -o "$o"
 case_ register-compression-nu register-compression "parameter file with ν = 0.5" "params_nu.json" 1 "$o" -- register-compression --dataset "$ph" --grid 36x27x12 --state D --parameters "$W/params_nu.json" -o "$o"
 case_ register-compression-garbage register-compression "parameter file that is not JSON" "params_garbage.json" 1 "$o" -- register-compression --dataset "$ph" --grid 36x27x12 --state D --parameters "$W/params_garbage.json" -o "$o"
