@@ -45,7 +45,8 @@ void add_subcommand_estimate(CLI::App& app)
     add_model_options(sub, o->model);
     sub->add_flag("--fit-moduli", o->fit_moduli, "Also fit the tumour and vessel Young's moduli (log-scaled, 1e4 … 1e8 Pa)");
     sub->add_option("--k-bounds", [o](const std::vector<std::string>& v) {
-        const auto low = v.size() == 2 ? parse_number(v[0]) : std::nullopt, high = v.size() == 2 ? parse_number(v[1]) : std::nullopt;
+        if (v.size() != 2) return false;
+        const auto low = parse_number(v[0]), high = parse_number(v[1]);
         if (!low || !high) return false; // CLI11 then reports "Could not convert: --k-bounds = …" (exit 104)
         o->k_min = *low, o->k_max = *high;
         return true;
