@@ -443,7 +443,9 @@ def build_report(folder, shown_as=None):
     command = summary.get("command") or ("demo" if isinstance(summary.get("methods"), list) else "register-compression")
     if command == "demo" and "inputs" not in summary and (folder / "phantom" / "manifest.json").exists():
         # The demo's held-out compression D against its own phantom.
-        summary = dict(summary, inputs={"dataset": str((folder / "phantom").resolve()), "state": "D", "preset": summary.get("preset"),
+        # The final folder's name, not the staging folder that the report is drawn in.
+        dataset_folder = Path(shown_as) / "phantom" if shown_as else (folder / "phantom").resolve()
+        summary = dict(summary, inputs={"dataset": str(dataset_folder), "state": "D", "preset": summary.get("preset"),
                                         "seed": summary.get("seed")})
     sections = [
         key_value_table("Inputs", summary.get("inputs", {}) if isinstance(summary.get("inputs"), dict) else {}),

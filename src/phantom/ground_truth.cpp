@@ -2,7 +2,9 @@
 #include "physreg/phantom/ground_truth.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/core/interrupt.hpp"
 #include "physreg/core/log.hpp"
+#include "physreg/core/progress_note.hpp"
 #include "physreg/mechanics/calculix.hpp"
 #include "physreg/phantom/dataset.hpp"
 
@@ -246,8 +248,19 @@ GroundTruthSolve solve_ground_truth_state(const GroundTruthModel& m, Loads loads
     for (int step = 1; step <= load_steps; ++step) {
         NewtonSummary summary;
         try {
-            summary = solver.solve_equilibrium(static_cast<double>(step) / load_steps);
+            // The load steps report their own progress (a compression can take minutes).
+            summary = solver.solve_equilibrium(static_cast<double>(step) / load_steps, [&](double, long iteration) {
+                post_progress_note(what, fmt::format("load step {}/{}, Newton iteration {}", step, load_steps, iteration));
+                // Ctrl-C / kill between Newton iterations. The compressions are solved in an OpenMP
+                // loop whose body catches and hands the exception to the main thread, so this
+                // throws even off the main thread (where throw_if_interrupted() does nothing).
+                if (const int signal = interrupt_signal()) throw Interrupted(signal, interruption_message(signal));
+            });
+        } catch (const Interrupted&) {
+            post_progress_note(what, "");
+            throw;
         } catch (const Error& e) {
+            post_progress_note(what, "");
             fail("ground truth for {}: {} (load step {} of {}; the load folds the ground truth's elements: try a smaller depth or a "
                  "larger tool)", what, e.what(), step, load_steps);
         }
@@ -264,6 +277,7 @@ GroundTruthSolve solve_ground_truth_state(const GroundTruthModel& m, Loads loads
                         summary.contact_updates, summary.factorisations, summary.assembly_s, summary.factorisation_s, summary.solve_s,
                         summary.contact_s, summary.line_search_s, summary.seconds);
     }
+    post_progress_note(what, "");
     s.load_steps = load_steps;
     s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     s.displacement_mm = solver.displacement_mm();
