@@ -27,6 +27,19 @@ struct SingleThreadedBlas {
 };
 
 
+const char* cholmod_ordering_name(int ordering)
+{
+    switch (ordering) {
+    case CHOLMOD_NATURAL: return "natural";
+    case CHOLMOD_GIVEN: return "given";
+    case CHOLMOD_AMD: return "AMD";
+    case CHOLMOD_METIS: return "METIS";
+    case CHOLMOD_NESDIS: return "NESDIS";
+    case CHOLMOD_COLAMD: return "COLAMD";
+    default: return "other";
+    }
+}
+
 } // namespace
 
 LinearSolverKind parse_linear_solver(const std::string& text)
@@ -90,6 +103,10 @@ struct SymmetricSolver::Impl {
         if (!analysed || k.nonZeros() != pattern_nnz || k.rows() != pattern_rows) {
             factor.analyzePattern(k);
             analysed = true;
+            const cholmod_common& c = factor.cholmod();
+            const auto& method = c.method[c.selected];
+            logger()->debug("linear solver: {} dofs, ordering {}, nnz(L) {:.3g}, {:.3g} GFlop per factorisation", k.rows(),
+                            cholmod_ordering_name(method.ordering), method.lnz, method.fl * 1e-9);
             pattern_nnz = k.nonZeros();
             pattern_rows = k.rows();
         }
