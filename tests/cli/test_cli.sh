@@ -162,19 +162,28 @@ expect_error "simulate: relaxation key under newton" "applies to method: relaxat
 [ -z "$(ls -A "$work/bad5" "$work/bad6" "$work/bad7" 2>/dev/null)" ] && pass || failed "no outputs after refused cases"
 
 # physreg phantom: the small preset, its manifest, bad input leaving nothing behind.
-expect_ok "phantom small" "$physreg" --log-level warn phantom --preset small --seed 3 --depths 8,10,8,6 -o "$work/ph" --json
+# The dataset comes from ctest's fixture (tests/cli/make_phantom_fixture.sh: the same command, run once
+# for every test that needs it) or, run alone, from this script.
+if [ -n "${PHYSREG_TEST_PHANTOM:-}" ] && [ -f "$PHYSREG_TEST_PHANTOM/manifest.json" ]; then
+  ph="$PHYSREG_TEST_PHANTOM"; cp "$ph.stdout.json" "$work/out.txt" && pass || failed "phantom fixture lacks its --json output"
+else
+  ph="$work/ph"
+  expect_ok "phantom small" "$physreg" --log-level warn phantom --preset small --seed 3 --depths 8,10,8,6 -o "$ph" --json
+fi
 grep -q '"format": "physreg-phantom-dataset"' "$work/out.txt" && pass || failed "phantom --json prints the manifest"
 grep -q '"calculix_validation"' "$work/out.txt" && pass || failed "phantom manifest records the CalculiX validation"
 for f in manifest.json ground_truth_tissues.yaml rest/labels.nii.gz rest/intensity.nii.gz rest/landmarks.csv rest/slices.png \
          states/A/displacement.nii.gz states/A/inverse_displacement.nii.gz states/A/mesh.vtu states/A/partial_surface_050.ply \
          states/insufflation/labels.nii.gz; do
-  expect_file "$work/ph/$f"
+  expect_file "$ph/$f"
 done
-expect_ok "info reads a phantom image" "$physreg" info "$work/ph/states/B/labels.nii.gz"
-expect_error "phantom: existing output" "not empty" "$physreg" phantom --preset small -o "$work/ph"
-expect_ok "phantom: one compression" "$physreg" --log-level warn phantom --preset small --depths 6 --no-calculix -o "$work/ph1"
-expect_ok "phantom: --force replaces" "$physreg" --log-level warn phantom --preset small --depths 6 --no-calculix -o "$work/ph1" --force
+expect_ok "info reads a phantom image" "$physreg" info "$ph/states/B/labels.nii.gz"
+expect_error "phantom: existing output" "not empty" "$physreg" phantom --preset small -o "$ph"
+# One run checks both: one depth makes one compression, and --force replaces a folder that is not empty.
+mkdir -p "$work/ph1/states/B"; echo stale > "$work/ph1/stale.txt"
+expect_ok "phantom: one compression, --force replaces" "$physreg" --log-level warn phantom --preset small --depths 6 --no-calculix -o "$work/ph1" --force
 expect_file "$work/ph1/states/A/mesh.vtu"
+[ ! -e "$work/ph1/stale.txt" ] && pass || failed "--force leaves the old folder's files"
 [ ! -e "$work/ph1/states/B" ] && pass || failed "one depth makes one compression"
 expect_error "phantom: unknown preset" "unknown preset 'liver9'" "$physreg" phantom --preset liver9 -o "$work/ph_bad1"
 expect_no_file "$work/ph_bad1"
@@ -185,7 +194,7 @@ expect_error "phantom: unknown material set" "unknown material set" "$physreg" p
 printf 'x' > "$work/not_an_image.nii.gz"
 expect_error "phantom: corrupt label map" "not_an_image.nii.gz" "$physreg" phantom --from-labels "$work/not_an_image.nii.gz" -o "$work/ph_bad4"
 expect_no_file "$work/ph_bad4"
-expect_error "phantom: no liver label" "no liver label" "$physreg" phantom --from-labels "$work/ph/rest/labels.nii.gz" --label-roles "liver=9" -o "$work/ph_bad5"
+expect_error "phantom: no liver label" "no liver label" "$physreg" phantom --from-labels "$ph/rest/labels.nii.gz" --label-roles "liver=9" -o "$work/ph_bad5"
 expect_no_file "$work/ph_bad5"
 expect_error "phantom: seed out of range" "--seed 0 outside" "$physreg" phantom --preset small --seed 0 -o "$work/ph_bad6"
 expect_no_file "$work/ph_bad6"
@@ -197,19 +206,19 @@ ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
 
 # physreg register-surface (paper 001) on the small phantom's insufflation, then from plain files.
 rs="--log-level warn register-surface --cell-size 10 --max-steps-per-plateau 20"
-expect_ok "register-surface dataset" "$physreg" $rs --dataset "$work/ph" --visible 50 -o "$work/rs" --json
+expect_ok "register-surface dataset" "$physreg" $rs --dataset "$ph" --visible 50 -o "$work/rs" --json
 for f in mesh.vtu displacement.nii.gz landmarks.csv regions.ply regions.vtk registered_surface.ply summary.json $html; do expect_file "$work/rs/$f"; done
 for key in '"biomechanical"' '"rigid"' '"icp"' '"at_rest"' '"hausdorff_mm"' '"node_tre_mm"' '"plateaus"' '"tre"'; do
   grep -q "$key" "$work/rs/summary.json" && pass || failed "register-surface summary lacks $key"
 done
 expect_ok "info reads the surface registration field" "$physreg" info "$work/rs/displacement.nii.gz"
-cloud="$work/ph/states/insufflation/partial_surface_050.csv"
+cloud="$ph/states/insufflation/partial_surface_050.csv"
 expect_ok "register-surface from a mesh, regions and a cloud" "$physreg" $rs --model "$work/rs/mesh.vtu" --regions "$work/rs/regions.vtk" \
-  --cloud "$cloud" --landmarks "$work/ph/rest/landmarks.csv" --landmarks-truth "$work/ph/states/insufflation/landmarks.csv" \
-  --truth-surface "$work/ph/states/insufflation/liver_surface.ply" --method rigid --support posterior -o "$work/rs2"
+  --cloud "$cloud" --landmarks "$ph/rest/landmarks.csv" --landmarks-truth "$ph/states/insufflation/landmarks.csv" \
+  --truth-surface "$ph/states/insufflation/liver_surface.ply" --method rigid --support posterior -o "$work/rs2"
 grep -q '"method": "rigid"' "$work/rs2/summary.json" && pass || failed "register-surface --method rigid recorded"
-expect_error "register-surface: output exists" "not empty" "$physreg" $rs --dataset "$work/ph" --visible 50 -o "$work/rs"
-expect_error "register-surface: visible fraction not in the dataset" "no partial surface with 30 % visible" "$physreg" $rs --dataset "$work/ph" -o "$work/rs_bad1"
+expect_error "register-surface: output exists" "not empty" "$physreg" $rs --dataset "$ph" --visible 50 -o "$work/rs"
+expect_error "register-surface: visible fraction not in the dataset" "no partial surface with 30 % visible" "$physreg" $rs --dataset "$ph" -o "$work/rs_bad1"
 expect_no_file "$work/rs_bad1"
 expect_error "register-surface: cloud label without region" "no region with that label" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$cloud" -o "$work/rs_bad2"
 expect_no_file "$work/rs_bad2"
@@ -219,32 +228,32 @@ printf 'x,y,z,label\n1,2,nan,0\n' > "$work/nan_cloud.csv"
 expect_error "register-surface: NaN in the cloud" "expected 4 finite values" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$work/nan_cloud.csv" -o "$work/rs_bad4"
 awk -F, '/^#/ || /^x,/ {print; next} {printf "%f,%f,%f,0\n", $1+500, $2, $3}' "$cloud" > "$work/far_cloud.csv"
 expect_error "register-surface: cloud far from the model" "farther than 40 mm" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$work/far_cloud.csv" -o "$work/rs_bad5"
-expect_error "register-surface: unknown method" "--method 'elastic'" "$physreg" $rs --dataset "$work/ph" --visible 50 --method elastic -o "$work/rs_bad6"
-expect_error "register-surface: two model sources" "exactly one of --dataset, --labels, --surface and --model" "$physreg" $rs --dataset "$work/ph" --model "$work/rs/mesh.vtu" -o "$work/rs_bad7"
+expect_error "register-surface: unknown method" "--method 'elastic'" "$physreg" $rs --dataset "$ph" --visible 50 --method elastic -o "$work/rs_bad6"
+expect_error "register-surface: two model sources" "exactly one of --dataset, --labels, --surface and --model" "$physreg" $rs --dataset "$ph" --model "$work/rs/mesh.vtu" -o "$work/rs_bad7"
 for d in rs_bad3 rs_bad4 rs_bad5 rs_bad6 rs_bad7; do expect_no_file "$work/$d"; done
 # A closed surface in, regions grown from two picked points, the heterogeneous model (capsule and
 # the phantom's vessel centrelines).
-awk -F, '/^#/ || /^name/ {print; next} /surface/ && n < 2 {n++; sub(/^[^,]*/, n == 1 ? "UN_1" : "AM_1"); print}' "$work/ph/rest/landmarks.csv" > "$work/seeds.csv"
+awk -F, '/^#/ || /^name/ {print; next} /surface/ && n < 2 {n++; sub(/^[^,]*/, n == 1 ? "UN_1" : "AM_1"); print}' "$ph/rest/landmarks.csv" > "$work/seeds.csv"
 expect_ok "register-surface from a closed surface" "$physreg" $rs --surface "$work/rs/regions.ply" --region-seeds "$work/seeds.csv" \
-  --cloud "$work/ph/states/insufflation/partial_surface_050.ply" --model-kind heterogeneous --vessels "$work/ph/rest/vessel_centrelines.csv" -o "$work/rs3"
+  --cloud "$ph/states/insufflation/partial_surface_050.ply" --model-kind heterogeneous --vessels "$ph/rest/vessel_centrelines.csv" -o "$work/rs3"
 grep -q '"vessels"' "$work/rs3/summary.json" && grep -q '"capsule"' "$work/rs3/summary.json" && pass || failed "heterogeneous model lists capsule and vessels"
 grep -q '"umbilical_notch"' "$work/rs3/summary.json" && pass || failed "--region-seeds made a notch region"
 printf 'v 0 0 0\nv 10 0 0\nv 0 10 0\nf 1 2 3\n' > "$work/open.obj"
 expect_error "register-surface: open surface" "not closed" "$physreg" $rs --surface "$work/open.obj" --cloud "$cloud" -o "$work/rs_bad8"
 expect_no_file "$work/rs_bad8"
-expect_error "register-surface: vessels without the heterogeneous model" "only the heterogeneous model" "$physreg" $rs --dataset "$work/ph" --visible 50 \
-  --vessels "$work/ph/rest/vessel_centrelines.csv" -o "$work/rs_bad9"
+expect_error "register-surface: vessels without the heterogeneous model" "only the heterogeneous model" "$physreg" $rs --dataset "$ph" --visible 50 \
+  --vessels "$ph/rest/vessel_centrelines.csv" -o "$work/rs_bad9"
 
 # physreg register-images (paper 002) on the small phantom's insufflation pair: the biomechanical
 # method with label baselines, then bad inputs (each: clear message, non-zero exit, no output).
 ri="--log-level warn register-images --cycles 4 --cell-size 8"
-expect_ok "register-images dataset" "$physreg" $ri --dataset "$work/ph" --baselines labels -o "$work/ri" --json
+expect_ok "register-images dataset" "$physreg" $ri --dataset "$ph" --baselines labels -o "$work/ri" --json
 for f in warped_labels.nii.gz warped_moving.nii.gz displacement.nii.gz landmarks.csv mesh.vtu parameters.json summary.json $html; do
   expect_file "$work/ri/$f"
 done
 [ -z "$html" ] || { grep -q '<h2>Accuracy</h2>' "$work/ri/report.html" && grep -q 'data:image/png;base64' "$work/ri/report.html"; } && pass || failed "register-images report.html has the accuracy table and inline figures"
 # --no-report: no report.html; --quiet: no progress lines and no info logs on stderr.
-expect_ok "register-images --no-report --quiet" "$physreg" --quiet --no-report register-images --cycles 2 --cell-size 8 --dataset "$work/ph" --baselines none -o "$work/ri_quiet"
+expect_ok "register-images --no-report --quiet" "$physreg" --quiet --no-report register-images --cycles 2 --cell-size 8 --dataset "$ph" --baselines none -o "$work/ri_quiet"
 expect_no_file "$work/ri_quiet/report.html"
 expect_file "$work/ri_quiet/summary.json"
 grep -q '%' "$work/err.txt" && failed "--quiet still printed progress" || pass
@@ -274,7 +283,7 @@ else:
 open(dst, 'wb').write(gzip.compress(bytes(data)))
 PY
 }
-st="$work/ph/states/insufflation"; rest="$work/ph/rest"
+st="$ph/states/insufflation"; rest="$ph/rest"
 edit_nifti "$st/labels.nii.gz" "$work/fixed_no_kidney.nii.gz" remove:6
 expect_error "register-images: a label in the moving image only" "structure 6 is in the moving segmentation only" \
   "$physreg" $ri --fixed "$st/intensity.nii.gz" --fixed-labels "$work/fixed_no_kidney.nii.gz" --moving "$rest/intensity.nii.gz" \
@@ -298,95 +307,95 @@ expect_error "register-images: singular stiffness" "singular" \
 expect_no_file "$work/ri_bad4"
 printf 'tissues:\n  - {label: 2, name: liver, young_modulus_pa: -5, poisson_ratio: 0.45}\n' > "$work/neg_tissue.yaml"
 expect_error "register-images: non-positive initial E" "young_modulus_pa" \
-  "$physreg" $ri --dataset "$work/ph" --tissues "$work/neg_tissue.yaml" -o "$work/ri_bad5"
+  "$physreg" $ri --dataset "$ph" --tissues "$work/neg_tissue.yaml" -o "$work/ri_bad5"
 expect_no_file "$work/ri_bad5"
 expect_error "register-images: empty structure" "structure 9 is empty in both" \
-  "$physreg" $ri --dataset "$work/ph" --structures 2,9 -o "$work/ri_bad6"
-expect_error "register-images: unknown method" "--method 'affine'" "$physreg" $ri --dataset "$work/ph" --method affine -o "$work/ri_bad7"
+  "$physreg" $ri --dataset "$ph" --structures 2,9 -o "$work/ri_bad6"
+expect_error "register-images: unknown method" "--method 'affine'" "$physreg" $ri --dataset "$ph" --method affine -o "$work/ri_bad7"
 
 # physreg estimate / register-compression / evaluate on the small phantom (≈ 5 mm cells).
 g="--grid 36x27x12"
-expect_ok "estimate" "$physreg" --log-level warn estimate --dataset "$work/ph" --train A,B --validate D $g --max-evaluations 3 \
+expect_ok "estimate" "$physreg" --log-level warn estimate --dataset "$ph" --train A,B --validate D $g --max-evaluations 3 \
   -o "$work/params.json" --report "$work/estimate_report.json" --json
 expect_file "$work/params.json"
 expect_file "$work/estimate_report.json"
 grep -q '"validation"' "$work/out.txt" && pass || failed "estimate --json reports validation TRE"
 grep -q 'VALIDATION' "$work/err.txt" && pass || failed "estimate prints the validation TRE"
 grep -q '"mesh_fingerprint"' "$work/params.json" && pass || failed "parameter file carries the mesh fingerprint"
-expect_ok "register-compression" "$physreg" --log-level warn register-compression --dataset "$work/ph" --state D \
+expect_ok "register-compression" "$physreg" --log-level warn register-compression --dataset "$ph" --state D \
   --parameters "$work/params.json" -o "$work/reg_D" --json
 for f in mesh.vtu landmarks.csv displacement.nii.gz summary.json $html; do expect_file "$work/reg_D/$f"; done
 expect_ok "info reads the predicted field" "$physreg" info "$work/reg_D/displacement.nii.gz"
-expect_ok "register-compression homogeneous" "$physreg" --log-level warn register-compression --dataset "$work/ph" --state D \
+expect_ok "register-compression homogeneous" "$physreg" --log-level warn register-compression --dataset "$ph" --state D \
   --variant homogeneous $g -o "$work/reg_D_h"
 expect_ok "evaluate" "$physreg" evaluate --predicted "coupled=$work/reg_D/landmarks.csv" --predicted "homogeneous=$work/reg_D_h/landmarks.csv" \
-  --truth "$work/ph/states/D/landmarks.csv" -o "$work/eval" --json
+  --truth "$ph/states/D/landmarks.csv" -o "$work/eval" --json
 for f in tre_coupled.csv tre_coupled.json tre_homogeneous.csv tre.png; do expect_file "$work/eval/$f"; done
 grep -q '"internal"' "$work/out.txt" && pass || failed "evaluate --json reports internal TRE"
-expect_ok "evaluate one series" "$physreg" evaluate --predicted "$work/reg_D/landmarks.csv" --truth "$work/ph/states/D/landmarks.csv" -o "$work/eval1"
+expect_ok "evaluate one series" "$physreg" evaluate --predicted "$work/reg_D/landmarks.csv" --truth "$ph/states/D/landmarks.csv" -o "$work/eval1"
 for f in tre.csv tre.json tre.png; do expect_file "$work/eval1/$f"; done
 # Bad input: nothing written.
-expect_error "estimate: negative stiffness" "k_c,s-t" "$physreg" estimate --dataset "$work/ph" --k-tumour -5 $g -o "$work/p_bad1.json"
+expect_error "estimate: negative stiffness" "k_c,s-t" "$physreg" estimate --dataset "$ph" --k-tumour -5 $g -o "$work/p_bad1.json"
 expect_no_file "$work/p_bad1.json"
-expect_error "estimate: NaN stiffness" "k_c,s-v" "$physreg" estimate --dataset "$work/ph" --k-vessel nan $g -o "$work/p_bad2.json"
+expect_error "estimate: NaN stiffness" "k_c,s-v" "$physreg" estimate --dataset "$ph" --k-vessel nan $g -o "$work/p_bad2.json"
 expect_no_file "$work/p_bad2.json"
-expect_error "estimate: not a compression" "not a tool compression" "$physreg" estimate --dataset "$work/ph" --train insufflation $g -o "$work/p_bad3.json"
+expect_error "estimate: not a compression" "not a tool compression" "$physreg" estimate --dataset "$ph" --train insufflation $g -o "$work/p_bad3.json"
 expect_no_file "$work/p_bad3.json"
-expect_error "estimate: unknown variant" "homogeneous, shared-nodes, coupled" "$physreg" estimate --dataset "$work/ph" --variant jelly -o "$work/p_bad4.json"
+expect_error "estimate: unknown variant" "homogeneous, shared-nodes, coupled" "$physreg" estimate --dataset "$ph" --variant jelly -o "$work/p_bad4.json"
 expect_error "estimate: not a dataset" "manifest.json" "$physreg" estimate --dataset "$work" -o "$work/p_bad5.json"
 expect_no_file "$work/p_bad5.json"
 sed 's/"mesh_fingerprint": "[0-9a-f]*/"mesh_fingerprint": "0123456789abcdef/' "$work/params.json" > "$work/params_other.json"
-expect_error "register: parameters from another mesh" "fitted on another mesh" "$physreg" register-compression --dataset "$work/ph" --state D \
+expect_error "register: parameters from another mesh" "fitted on another mesh" "$physreg" register-compression --dataset "$ph" --state D \
   --parameters "$work/params_other.json" -o "$work/reg_bad1"
 expect_no_file "$work/reg_bad1"
 sed 's/"parenchyma_tumour": [0-9.e+]*/"parenchyma_tumour": -3/' "$work/params.json" > "$work/params_neg.json"
-expect_error "register: negative stiffness in the file" "params_neg.json" "$physreg" register-compression --dataset "$work/ph" --state D \
+expect_error "register: negative stiffness in the file" "params_neg.json" "$physreg" register-compression --dataset "$ph" --state D \
   --parameters "$work/params_neg.json" -o "$work/reg_bad2"
 expect_no_file "$work/reg_bad2"
 sed 's/"poisson_ratio"/"poisson_ration"/' "$work/params.json" > "$work/params_typo.json"
 expect_error "register: misspelt key in the parameter file" "unknown key 'poisson_ration' in the file" "$physreg" register-compression \
-  --dataset "$work/ph" --state D --parameters "$work/params_typo.json" -o "$work/reg_bad2b"
+  --dataset "$ph" --state D --parameters "$work/params_typo.json" -o "$work/reg_bad2b"
 grep -q "did you mean 'poisson_ratio'" "$work/err.txt" && pass || failed "parameter-file typo gets a suggestion"
 expect_no_file "$work/reg_bad2b"
-expect_error "register: grid finer than the voxels" "larger than" "$physreg" register-compression --dataset "$work/ph" --state D --grid 500x27x12 -o "$work/reg_bad3"
+expect_error "register: grid finer than the voxels" "larger than" "$physreg" register-compression --dataset "$ph" --state D --grid 500x27x12 -o "$work/reg_bad3"
 expect_no_file "$work/reg_bad3"
 head -n 5 "$work/reg_D/landmarks.csv" > "$work/few.csv"
-expect_error "evaluate: landmarks missing" "no prediction" "$physreg" evaluate --predicted "$work/few.csv" --truth "$work/ph/states/D/landmarks.csv" -o "$work/eval_bad"
+expect_error "evaluate: landmarks missing" "no prediction" "$physreg" evaluate --predicted "$work/few.csv" --truth "$ph/states/D/landmarks.csv" -o "$work/eval_bad"
 expect_no_file "$work/eval_bad"
 ls -a "$work" | grep -q 'partial' && failed "staging folder left behind" || pass
 
 # physreg enrich build / apply, bench enrich on the small phantom.
 cg="--coarse-grid 12x9x6"
-expect_ok "enrich build" "$physreg" --log-level warn enrich build --dataset "$work/ph" --parameters "$work/params.json" $cg --positions B,D \
+expect_ok "enrich build" "$physreg" --log-level warn enrich build --dataset "$ph" --parameters "$work/params.json" $cg --positions B,D \
   --depths 6,10,14 -o "$work/db.phe" --json
 expect_file "$work/db.phe"
 grep -q '"conditions": 6' "$work/out.txt" && pass || failed "enrich build reports 6 conditions"
 [ -e "$work/db.phe.partial" ] && failed "checkpoints left after a finished build" || pass
-expect_error "enrich build: existing database" "use --force" "$physreg" enrich build --dataset "$work/ph" --parameters "$work/params.json" \
+expect_error "enrich build: existing database" "use --force" "$physreg" enrich build --dataset "$ph" --parameters "$work/params.json" \
   $cg --positions B --depths 3 -o "$work/db.phe"
-expect_ok "enrich apply" "$physreg" --log-level warn enrich apply --database "$work/db.phe" --dataset "$work/ph" --parameters "$work/params.json" \
+expect_ok "enrich apply" "$physreg" --log-level warn enrich apply --database "$work/db.phe" --dataset "$ph" --parameters "$work/params.json" \
   --state D -o "$work/c2f_D" --json
 for f in mesh.vtu coarse.vtu landmarks.csv displacement.nii.gz summary.json $html; do expect_file "$work/c2f_D/$f"; done
-expect_ok "enrich apply by field" "$physreg" --log-level warn enrich apply --database "$work/db.phe" --dataset "$work/ph" \
+expect_ok "enrich apply by field" "$physreg" --log-level warn enrich apply --database "$work/db.phe" --dataset "$ph" \
   --parameters "$work/params.json" --state B --match field --blend 2 -o "$work/c2f_B"
-expect_ok "enrich apply outside the range" "$physreg" enrich apply --database "$work/db.phe" --dataset "$work/ph" --parameters "$work/params.json" \
+expect_ok "enrich apply outside the range" "$physreg" enrich apply --database "$work/db.phe" --dataset "$ph" --parameters "$work/params.json" \
   --state A -o "$work/c2f_A"
 grep -q "outside the database's range" "$work/err.txt" && grep -q "extrapolated" "$work/err.txt" && pass || failed "enrich apply warns about extrapolation"
-expect_ok "bench enrich" "$physreg" --log-level warn bench enrich --dataset "$work/ph" --parameters "$work/params.json" --database "$work/db.phe" \
+expect_ok "bench enrich" "$physreg" --log-level warn bench enrich --dataset "$ph" --parameters "$work/params.json" --database "$work/db.phe" \
   --states D --steps 4 -o "$work/bench.json"
 grep -q '"speed_up"' "$work/bench.json" && pass || failed "bench enrich reports the speed-up"
 expect_error "enrich apply: database of another mesh" "built for another fine mesh" "$physreg" enrich apply --database "$work/db.phe" \
-  --dataset "$work/ph" --grid 30x27x12 --state D -o "$work/c2f_bad1"
+  --dataset "$ph" --grid 30x27x12 --state D -o "$work/c2f_bad1"
 expect_no_file "$work/c2f_bad1"
 expect_error "enrich apply: other tissue parameters" "other model parameters" "$physreg" enrich apply --database "$work/db.phe" \
-  --dataset "$work/ph" $g --k-tumour 77 --state D -o "$work/c2f_bad2"
+  --dataset "$ph" $g --k-tumour 77 --state D -o "$work/c2f_bad2"
 head -c 20000 "$work/db.phe" > "$work/cut.phe"
-expect_error "enrich apply: truncated database" "truncated" "$physreg" enrich apply --database "$work/cut.phe" --dataset "$work/ph" \
+expect_error "enrich apply: truncated database" "truncated" "$physreg" enrich apply --database "$work/cut.phe" --dataset "$ph" \
   --parameters "$work/params.json" --state D -o "$work/c2f_bad3"
 expect_no_file "$work/c2f_bad3"
 cp "$work/db.phe" "$work/flip.phe"
 printf '\x55' | dd of="$work/flip.phe" bs=1 seek=30000 conv=notrunc 2>/dev/null
-expect_error "enrich apply: corrupt database" "checksum mismatch" "$physreg" enrich apply --database "$work/flip.phe" --dataset "$work/ph" \
+expect_error "enrich apply: corrupt database" "checksum mismatch" "$physreg" enrich apply --database "$work/flip.phe" --dataset "$ph" \
   --parameters "$work/params.json" --state D -o "$work/c2f_bad4"
 expect_no_file "$work/c2f_bad4"
 

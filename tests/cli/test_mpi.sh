@@ -5,8 +5,13 @@ set -eu
 physreg="$1"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-"$physreg" --log-level warn phantom --preset small --depths 6,8,6,6 --no-calculix -o "$work/ph"
-args=(--log-level warn enrich build --dataset "$work/ph" --grid 36x27x12 --coarse-grid 12x9x6 --positions B,C,D --depths 6,10)
+# The small phantom: ctest's shared fixture (tests/cli/make_phantom_fixture.sh, read only), or our own.
+ph="${PHYSREG_TEST_PHANTOM:-}"
+if [ -z "$ph" ] || [ ! -f "$ph/manifest.json" ]; then
+  ph="$work/ph"
+  "$physreg" --log-level warn phantom --preset small --depths 6,8,6,6 --no-calculix -o "$ph"
+fi
+args=(--log-level warn enrich build --dataset "$ph" --grid 36x27x12 --coarse-grid 12x9x6 --positions B,C,D --depths 6,10)
 "$physreg" "${args[@]}" -o "$work/one.phe"
 root=()
 [ "$(id -u)" -eq 0 ] && root=(--allow-run-as-root)

@@ -88,8 +88,13 @@ if [ "$(id -u)" -eq 0 ]; then # a copy of the program and its library that user 
   chmod -R a+rX "$work/unprivileged"
 fi
 # ---------------------------------------------------------------- valid fixtures to damage
-"$physreg" -q phantom --preset small --seed 3 --depths 8,10,8,6 -o "$W/ph" >/dev/null 2>&1 || { echo "fixture: phantom failed"; exit 1; }
-ph="$W/ph"
+# The small phantom: ctest's shared fixture (tests/cli/make_phantom_fixture.sh, read only here), or our own.
+if [ -n "${PHYSREG_TEST_PHANTOM:-}" ] && [ -f "$PHYSREG_TEST_PHANTOM/manifest.json" ]; then
+  ph="$PHYSREG_TEST_PHANTOM"
+else
+  "$physreg" -q phantom --preset small --seed 3 --depths 8,10,8,6 -o "$W/ph" >/dev/null 2>&1 || { echo "fixture: phantom failed"; exit 1; }
+  ph="$W/ph"
+fi
 labels="$ph/rest/labels.nii.gz"
 "$physreg" -q mesh "$labels" --tissues "$ph/ground_truth_tissues.yaml" --grid 12x10x8 -o "$W/m.vtu" >/dev/null 2>&1 || { echo "fixture: mesh failed"; exit 1; }
 "$physreg" -q enrich build --dataset "$ph" --grid 6x5x3 --coarse-grid 3x3x3 --positions B --depths 6 -o "$W/db.phe" >/dev/null 2>&1 ||

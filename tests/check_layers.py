@@ -1,0 +1,83 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The layer check: no include from a lower layer to a higher one.
+
+Each folder of src/ and include/physreg/ is a layer with a rank; a file may include headers of its
+own rank or below. apps/ and python/ sit on top. A back-edge that is not in KNOWN_BACK_EDGES fails
+the check, naming the file, the line and the two layers; a listed back-edge that has gone is
+reported too, so the list only shrinks. Run: check_layers.py SOURCE_DIR (ctest layers.no_back_edges).
+"""
+import pathlib
+import re
+import sys
+
+# Lowest first. Layers of one rank may include each other.
+RANKS = {
+    "core": 0,
+    "image": 1, "model": 1,
+    "mesh": 2,
+    "io": 3, "field": 3,
+    "mechanics": 4,
+    "evaluation": 5, "figures": 5,
+    "registration": 6,
+    "phantom": 7,       # the experiment generator: above the registration it is used to judge
+    "apps": 8,
+    "python": 9,
+}
+# Back-edges that exist today, to be removed (issue "The house", item 1), never added to.
+KNOWN_BACK_EDGES = {
+    ("src/registration/estimation.cpp", "phantom"),         # the dataset manifest reader belongs in io/
+    ("src/registration/surface_model.cpp", "phantom"),      # partial-surface labels
+    ("include/physreg/registration/surface_matching.hpp", "phantom"),
+    ("include/physreg/registration/liver_model.hpp", "phantom"),  # label roles
+    ("include/physreg/figures/slice_figure.hpp", "phantom"),      # label roles
+}
+INCLUDE = re.compile(r'^\s*#\s*include\s+"physreg/([a-z_]+)/')
+
+
+def layer_of(relative: pathlib.PurePosixPath):
+    parts = relative.parts
+    if parts[0] == "src" and len(parts) > 2:
+        return parts[1]
+    if parts[:2] == ("include", "physreg") and len(parts) > 3:
+        return parts[2]
+    if parts[0] in ("apps", "python"):
+        return parts[0]
+    return None
+
+
+def main(root: pathlib.Path) -> int:
+    problems, seen = [], set()
+    files = [p for d in ("src", "include", "apps", "python") for p in (root / d).rglob("*")
+             if p.suffix in (".cpp", ".hpp", ".h", ".in") and p.is_file()]
+    for path in sorted(files):
+        relative = pathlib.PurePosixPath(path.relative_to(root).as_posix())
+        layer = layer_of(relative)
+        if layer is None:
+            continue
+        if layer not in RANKS:
+            problems.append(f"{relative}: folder '{layer}' has no rank in tests/check_layers.py (add it to RANKS)")
+            continue
+        for number, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+            match = INCLUDE.match(line)
+            if not match:
+                continue
+            target = match.group(1)
+            if target not in RANKS:
+                problems.append(f"{relative}:{number}: includes unknown layer '{target}'")
+            elif RANKS[target] > RANKS[layer]:
+                key = (str(relative), target)
+                seen.add(key)
+                if key not in KNOWN_BACK_EDGES:
+                    problems.append(f"{relative}:{number}: layer '{layer}' (rank {RANKS[layer]}) includes the higher layer "
+                                    f"'{target}' (rank {RANKS[target]}): {line.strip()}")
+    for key in sorted(KNOWN_BACK_EDGES - seen):
+        problems.append(f"{key[0]} no longer includes '{key[1]}': remove it from KNOWN_BACK_EDGES")
+    for p in problems:
+        print(p)
+    print(f"layers: {len(files)} files checked, {len(problems)} problem(s), {len(seen & KNOWN_BACK_EDGES)} known back-edge(s) left")
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(pathlib.Path(sys.argv[1] if len(sys.argv) > 1 else ".").resolve()))
