@@ -5,6 +5,7 @@
 set -euo pipefail
 packages=(
   cmake make g++ pkg-config
+  ccache                   # compiler cache: rebuilds of the same sources (CI after a developer's build) are quick
   libinsighttoolkit5-dev   # ITK 5.2: medical image IO (NIfTI, NRRD, MetaImage, DICOM)
   libeigen3-dev            # Eigen 3.4: linear algebra
   libsuitesparse-dev       # CHOLMOD supernodal Cholesky: implicit (Newton) solves
