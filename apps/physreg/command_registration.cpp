@@ -60,11 +60,13 @@ void add_subcommand_estimate(CLI::App& app)
         check_output_path(o->output, "--output");
         if (!o->report_file.empty()) check_output_path(o->report_file, "--report");
         const PhantomDataset dataset = read_phantom_dataset(o->dataset);
-        const ModelParameters initial = model_parameters(o->model, ModelParameters{});
-        const auto train = compression_cases(dataset, split_names(o->train, "--train"));
-        const auto validation = o->validate == "none" ? std::vector<CompressionCase>{} : compression_cases(dataset, split_names(o->validate, "--validate"));
         const DatasetState& rest = dataset.state("rest");
         const LabelVolume labels = read_label_volume(dataset.path(rest.files.at("labels")));
+        ModelParameters defaults;
+        if (o->model.grid.empty()) defaults.grid = default_liver_grid(labels, dataset.roles); // from the dataset
+        const ModelParameters initial = model_parameters(o->model, defaults);
+        const auto train = compression_cases(dataset, split_names(o->train, "--train"));
+        const auto validation = o->validate == "none" ? std::vector<CompressionCase>{} : compression_cases(dataset, split_names(o->validate, "--validate"));
         const LandmarkSet rest_landmarks = read_landmarks(dataset.path(rest.files.at("landmarks")));
         EstimationOptions options;
         options.fit_moduli = o->fit_moduli;
@@ -151,6 +153,12 @@ void add_subcommand_register_compression(CLI::App& app)
         bar.update(0.05, fmt::format("{} model: {} nodes, {} hexahedra, {} interface points", to_string(p.variant), model.mesh.node_count(),
                                      model.mesh.cell_count(), model.coupling.points().size()));
         const auto prediction = predict_compression(model, cases[0].tool, rest_landmarks, prediction_options(o->model), "compression " + o->state);
+        // A tool that never reaches the model leaves it at rest: say so instead of a silent zero.
+        const bool contact = prediction.max_displacement_mm > 1e-6;
+        if (!contact)
+            logger()->warn("compression {}: no contact: the tool never touches the model (largest displacement {:.2g} mm), so the "
+                           "prediction is the landmarks at rest (the liver-only model: the tool presses the skin)",
+                           o->state, prediction.max_displacement_mm);
         bar.update(0.8, "writing outputs");
         MeshData data;
         data.point_data.push_back({"displacement", 3, prediction.displacement_mm});
@@ -169,6 +177,7 @@ void add_subcommand_register_compression(CLI::App& app)
                         {"iterations", prediction.iterations},
                         {"seconds", prediction.seconds},
                         {"max_displacement_mm", prediction.max_displacement_mm},
+                        {"tool_contact", contact ? "contact" : "no contact"},
                         {"max_coupling_gap_mm", prediction.max_coupling_gap_mm},
                         {"tre_against_dataset", json::parse(tre_stats_json(tre))},
                         {"files", {{"mesh", "mesh.vtu"}, {"landmarks", "landmarks.csv"}, {"displacement", "displacement.nii.gz"}}},
@@ -181,8 +190,9 @@ void add_subcommand_register_compression(CLI::App& app)
         write_html_report(staging.path(), o->output);
         staging.commit();
         bar.finish();
-        std::cerr << fmt::format("register-compression {} ({}): {} iterations, {:.2f} s, max displacement {:.2f} mm; TRE {}\n", o->state,
-                                 to_string(p.variant), prediction.iterations, prediction.seconds, prediction.max_displacement_mm, tre_line(tre));
+        std::cerr << fmt::format("register-compression {} ({}): {} iterations, {:.2f} s, max displacement {:.2f} mm{}; TRE {}\n", o->state,
+                                 to_string(p.variant), prediction.iterations, prediction.seconds, prediction.max_displacement_mm,
+                                 contact ? "" : " (no contact)", tre_line(tre));
         if (o->json) std::cout << summary.dump(2) << std::endl;
     });
 }

@@ -27,7 +27,7 @@ void add_model_options(CLI::App* sub, ModelOptions& m)
 {
     sub->add_option("--variant", m.variant, "Model: homogeneous (Han et al.), shared-nodes (per-element materials) or coupled (MLS "
                                             "penalty coupling, paper 000; default)");
-    sub->add_option("--grid", m.grid, "Cells over the liver's bounding box per image axis (default 74x54x18)");
+    sub->add_option("--grid", m.grid, "Cells over the liver's bounding box per image axis (default: 74x54x18, or one cell per voxel where the liver spans fewer voxels)");
     sub->add_option("--k-tumour", m.k_tumour, "Parenchyma–tumour coupling stiffness k_c,s-t, N/m (default 600, paper 000)");
     sub->add_option("--k-vessel", m.k_vessel, "Parenchyma–vessel coupling stiffness k_c,s-v, N/m (default 500, paper 000)");
     sub->add_option("--support-radius", m.support_radius, "MLS support radius, element sizes (default 1.25)");
@@ -97,6 +97,9 @@ LoadedModel load_model(const std::string& dataset, const std::string& parameters
         if (options.variant != "coupled" || !options.grid.empty() || options.k_tumour || options.k_vessel)
             fail("--parameters: the model comes from the parameter file; drop --variant/--grid/--k-tumour/--k-vessel");
     } else {
+        // Without --grid the grid comes from the dataset (paper 000's, or one cell per voxel on a
+        // coarse image such as the small preset's).
+        if (options.grid.empty()) p.grid = default_liver_grid(out.labels, out.dataset.roles);
         p = model_parameters(options, p);
     }
     out.model = build_liver_model(out.labels, out.dataset.roles, p, out.dataset.path(rest.files.at("labels")).string());

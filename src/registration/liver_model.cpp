@@ -171,6 +171,30 @@ void LiverModel::set_coupling_stiffness(const CouplingStiffness& stiffness)
     coupling.set_stiffness(stiffness);
 }
 
+Index3 default_liver_grid(const LabelVolume& rest_labels, const LabelRoles& roles, const Index3& cap)
+{
+    std::vector<char> model_label(65536, 0);
+    for (const auto* set : {&roles.liver, &roles.lesion, &roles.vessel})
+        for (const auto l : *set)
+            if (l >= 0 && l < 65536) model_label[static_cast<std::size_t>(l)] = 1;
+    const auto& size = rest_labels.geometry.size;
+    Index3 lo{size[0], size[1], size[2]}, hi{-1, -1, -1};
+    for (std::int64_t k = 0; k < size[2]; ++k)
+        for (std::int64_t j = 0; j < size[1]; ++j)
+            for (std::int64_t i = 0; i < size[0]; ++i)
+                if (model_label[rest_labels.labels[static_cast<std::size_t>(i + size[0] * (j + size[1] * k))]]) {
+                    const Index3 at{i, j, k};
+                    for (int a = 0; a < 3; ++a) {
+                        lo[a] = std::min(lo[a], at[a]);
+                        hi[a] = std::max(hi[a], at[a]);
+                    }
+                }
+    if (hi[0] < 0) fail("default model grid: no liver label ({}) in the label map", fmt::join(roles.liver, ","));
+    Index3 grid;
+    for (int a = 0; a < 3; ++a) grid[a] = std::max<std::int64_t>(2, std::min<std::int64_t>(cap[a], hi[a] - lo[a] + 1));
+    return grid;
+}
+
 LiverModel build_liver_model(const LabelVolume& rest_labels, const LabelRoles& roles, const ModelParameters& parameters,
                              const std::string& what)
 {

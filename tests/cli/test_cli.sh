@@ -328,6 +328,13 @@ for f in mesh.vtu landmarks.csv displacement.nii.gz summary.json $html; do expec
 expect_ok "info reads the predicted field" "$physreg" info "$work/reg_D/displacement.nii.gz"
 expect_ok "register-compression homogeneous" "$physreg" --log-level warn register-compression --dataset "$ph" --state D \
   --variant homogeneous $g -o "$work/reg_D_h"
+# Without --grid the grid comes from the dataset (the small preset's 4 mm voxels are fewer than
+# paper 000's 74x54x18 cells), and a tool that never reaches the liver-only model is said, not hidden.
+expect_ok "register-compression, grid from the dataset" "$physreg" --no-report register-compression --dataset "$ph" --state B -o "$work/reg_B_default"
+grep -q '"tool_contact"' "$work/reg_B_default/summary.json" && pass || failed "register-compression reports whether the tool touched the model"
+if grep -q '"tool_contact": "no contact"' "$work/reg_B_default/summary.json"; then
+  grep -q "no contact" "$work/err.txt" && pass || failed "a prediction without contact warns"
+fi
 expect_ok "evaluate" "$physreg" evaluate --predicted "coupled=$work/reg_D/landmarks.csv" --predicted "homogeneous=$work/reg_D_h/landmarks.csv" \
   --truth "$ph/states/D/landmarks.csv" -o "$work/eval" --json
 for f in tre_coupled.csv tre_coupled.json tre_homogeneous.csv tre.png; do expect_file "$work/eval/$f"; done

@@ -61,6 +61,12 @@ struct LiverModel {
     void set_coupling_stiffness(const CouplingStiffness& stiffness);
 };
 
+/// The grid a dataset's model gets when none is asked for: paper 000's 74 × 54 × 18 cells (`cap`)
+/// over the liver's bounding box, or one cell per voxel along an axis where the liver (with its
+/// lesions and vessels) spans fewer voxels than that (the small preset's 4 mm images). Throws
+/// Error when `rest_labels` holds no liver-role label.
+Index3 default_liver_grid(const LabelVolume& rest_labels, const LabelRoles& roles, const Index3& cap = Index3{74, 54, 18});
+
 /// Meshes the liver-role labels of `rest_labels`; `what` names the input in messages.
 LiverModel build_liver_model(const LabelVolume& rest_labels, const LabelRoles& roles, const ModelParameters& parameters,
                              const std::string& what);

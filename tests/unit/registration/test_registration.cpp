@@ -218,3 +218,36 @@ TEST(Estimation, FitsCouplingWithinBoundsAndReportsTrainAndValidation)
 
 } // namespace
 } // namespace physreg
+
+namespace physreg {
+namespace {
+
+TEST(LiverModel, DefaultGridComesFromTheLiverExtentInVoxels)
+{
+    // A 100 × 30 × 8-voxel image whose liver (with a lesion) spans voxels 10…89 × 5…24 × 2…5:
+    // 80 × 20 × 4 voxels. Paper 000's 74 × 54 × 18 cells fit along x only.
+    const LabelRoles roles = phantom_label_roles();
+    const auto liver = static_cast<std::uint16_t>(*roles.liver.begin());
+    const auto lesion = static_cast<std::uint16_t>(*roles.lesion.begin());
+    const auto body = static_cast<std::uint16_t>(*roles.body.begin());
+    const LabelVolume volume = test::make_volume({100, 30, 8}, [&](int i, int j, int k) -> std::uint16_t {
+        if (i == 89 && j == 24 && k == 5) return lesion;
+        if (i >= 10 && i < 89 && j >= 5 && j < 25 && k >= 2 && k < 6) return liver;
+        return body;
+    });
+    const Index3 grid = default_liver_grid(volume, roles);
+    EXPECT_EQ(grid, (Index3{74, 20, 4}));
+    EXPECT_EQ(default_liver_grid(volume, roles, Index3{24, 18, 18}), (Index3{24, 18, 4}));
+    // The grid meshes: every target cell holds at least one voxel.
+    ModelParameters p;
+    p.variant = ModelVariant::homogeneous;
+    p.grid = grid;
+    const LiverModel model = build_liver_model(volume, roles, p, "synthetic");
+    EXPECT_GT(model.mesh.cell_count(), 0u);
+    // No liver label: an error that names the labels looked for.
+    const LabelVolume empty = test::make_volume({10, 10, 10}, [&](int, int, int) { return body; });
+    EXPECT_NE(test::error_message([&] { default_liver_grid(empty, roles); }).find("no liver label"), std::string::npos);
+}
+
+} // namespace
+} // namespace physreg
