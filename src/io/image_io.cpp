@@ -6,6 +6,7 @@
 #include "physreg/core/error.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cctype>
 #include <sstream>
 #include <iterator>
@@ -129,15 +130,17 @@ void verify_nifti(const fs::path& path, bool whole_file)
     if (!file) fail("{}: cannot open file", what);
     unsigned char header[540];
     const int got = gzread(file, header, sizeof(header));
-    auto get = [&](int offset, int size, bool swap) {
-        unsigned char b[8];
-        std::memcpy(b, header + offset, size);
-        if (swap) std::reverse(b, b + size);
-        std::int64_t v = 0;
-        if (size == 2) { std::int16_t x; std::memcpy(&x, b, 2); v = x; }
-        if (size == 4) { std::int32_t x; std::memcpy(&x, b, 4); v = x; }
-        if (size == 8) { std::int64_t x; std::memcpy(&x, b, 8); v = x; }
-        return v;
+    // A signed integer of `size` bytes at `offset`, in the host's (little-endian) order or swapped.
+    // Assembled byte by byte: GCC 12 took the former memcpy + std::reverse into an 8-byte buffer
+    // for a 32-byte write (-Wstringop-overflow, a false positive).
+    static_assert(std::endian::native == std::endian::little, "the NIfTI header check assumes a little-endian host");
+    auto get = [&](int offset, int size, bool swap) -> std::int64_t {
+        std::uint64_t raw = 0;
+        for (int i = 0; i < size; ++i)
+            raw |= std::uint64_t(header[offset + (swap ? size - 1 - i : i)]) << (8 * i);
+        if (size == 2) return static_cast<std::int16_t>(raw);
+        if (size == 4) return static_cast<std::int32_t>(raw);
+        return static_cast<std::int64_t>(raw);
     };
     // Sizes from a header that may be corrupt: long double, so that a product of seven damaged
     // dimensions or a huge vox_offset cannot overflow (found by fuzzing).

@@ -2,6 +2,7 @@
 #include "physreg/mechanics/tled_solver.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/core/interrupt.hpp"
 #include "physreg/core/log.hpp"
 #include "detail/hexahedron_kernel.hpp"
 
@@ -510,6 +511,7 @@ void TledSolver<Real>::advance(double duration_s, const ProgressCallback& progre
         if (failed) break;
     }
     m_governor.record(omp_get_wtime() - chunk_start);
+    if (begin % 256 == 0) throw_if_interrupted(); // between chunks, outside the parallel region
     }
     // Put the buffers back in place: m_u now, m_u_prev one step before.
     std::vector<Real>* vectors[3] = {&m_u_prev, &m_u, &m_u_next};
@@ -676,6 +678,9 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
         const bool still = increment <= 1e-9 || estimate <= options.displacement_tolerance_mm;
         const bool balanced = residual <= std::max(options.residual_tolerance * reference, 1e-10);
         if (progress && iteration % 200 == 0) progress(-1.0, iteration);
+        // Ctrl-C / kill between iterations (a no-op inside an enclosing parallel region, where the
+        // caller's next serial point stops instead): a relaxation can run for minutes.
+        if (iteration % 64 == 0) throw_if_interrupted();
         m_governor.record(omp_get_wtime() - iteration_start);
         if (still && balanced && iteration > ramp) {
             summary.status = SolveStatus::converged;
