@@ -124,10 +124,21 @@ LandmarkSet read_csv(std::istream& in, const std::string& what)
         }
         const auto fields = split_csv(line);
         if (header.empty()) {
+            // Headerless rows of three numbers (x,y,z, as many tools write them): the points are
+            // named 1…N in file order.
+            const bool numbers_only = fields.size() == 3 && std::all_of(fields.begin(), fields.end(), [](const std::string& f) {
+                                          return physreg::parse_number(trim(f)).has_value();
+                                      });
+            if (numbers_only) {
+                header = {"x", "y", "z"};
+                col_x = 0, col_y = 1, col_z = 2;
+            }
+        }
+        if (header.empty()) {
             header = fields;
             for (std::size_t c = 0; c < fields.size(); ++c) {
                 const std::string h = lower(fields[c]);
-                if (h == "name" || h == "label") col_name = static_cast<int>(c);
+                if (h == "name" || h == "label" || h == "id") col_name = static_cast<int>(c);
                 else if (h == "x" || h == "x_mm" || h == "x_mm_lps" || h == "l") col_x = static_cast<int>(c);
                 else if (h == "y" || h == "y_mm" || h == "y_mm_lps" || h == "p") col_y = static_cast<int>(c);
                 else if (h == "z" || h == "z_mm" || h == "z_mm_lps" || h == "s") col_z = static_cast<int>(c);
@@ -136,13 +147,14 @@ LandmarkSet read_csv(std::istream& in, const std::string& what)
                 else if (h.ends_with("_m") || h.ends_with("_cm")) fail("{}: column '{}' is not in mm", what, fields[c]);
             }
             if (col_name < 0 || col_x < 0 || col_y < 0 || col_z < 0)
-                fail("{}: header must name the columns name,x,y,z[,type] (found '{}')", what, line);
+                fail("{}: header must name the columns name|id|label,x,y,z[,type], or the file holds rows of three numbers x,y,z "
+                     "(found '{}')", what, line);
             continue;
         }
         const std::string where = fmt::format("{}: line {}", what, line_number);
         if (fields.size() != header.size()) fail("{}: {} fields, the header has {}", where, fields.size(), header.size());
         Landmark l;
-        l.name = fields[col_name];
+        l.name = col_name >= 0 ? fields[col_name] : std::to_string(out.size() + 1);
         l.position = to_lps(Vec3(parse_number(fields[col_x], where), parse_number(fields[col_y], where),
                                  parse_number(fields[col_z], where)), ras);
         if (col_type >= 0) {

@@ -66,6 +66,29 @@ TEST(IoLandmarks, RasFilesAreConvertedToLps)
     EXPECT_EQ(read_landmarks(dir / "ras.csv")[0].position, Vec3(-1, -2, 3));
 }
 
+TEST(IoLandmarks, CsvAsUsersWriteThem)
+{
+    // `id` (or `label`) for the name column, and headerless rows of x,y,z named 1…N.
+    test::TempDir dir;
+    std::ofstream(dir / "id.csv") << "id,x,y,z\n7,1,2,3\n9,4,5,6\n";
+    LandmarkSet l = read_landmarks(dir / "id.csv");
+    ASSERT_EQ(l.size(), 2u);
+    EXPECT_EQ(l[1].name, "9");
+    EXPECT_EQ(l[1].position, Vec3(4, 5, 6));
+    std::ofstream(dir / "bare.csv") << "# a comment\n1.5, -2, 3e1\n4,5,6\n";
+    l = read_landmarks(dir / "bare.csv");
+    ASSERT_EQ(l.size(), 2u);
+    EXPECT_EQ(l[0].name, "1");
+    EXPECT_EQ(l[0].position, Vec3(1.5, -2, 30));
+    EXPECT_EQ(l[1].name, "2");
+    // A row of three numbers after them that is not a number is still an error naming the line.
+    std::ofstream(dir / "bare_bad.csv") << "1,2,3\n4,x,6\n";
+    EXPECT_NE(error_of(dir / "bare_bad.csv").find("line 2"), std::string::npos);
+    // Two numbers are neither a header nor a point.
+    std::ofstream(dir / "two.csv") << "1,2\n";
+    EXPECT_NE(error_of(dir / "two.csv").find("header must name"), std::string::npos);
+}
+
 TEST(IoLandmarks, BadFilesAreRefusedWithReasons)
 {
     test::TempDir dir;
