@@ -6,11 +6,20 @@
 # baselines' metric figures inside them are compared to 1e-9 relative (ITK 5.2's v4 metric and
 # Demons filter sum one partial per thread; their fields and TRE are identical). report.html embeds
 # the summaries' timings and is not compared.
+#
+# The same commands also check that a change (a refactoring, a move of files) leaves the outputs as
+# they were: record them with the old build, compare with the new one.
+#   test_determinism.sh PHYSREG                      1 thread against 2 threads (ctest cli.determinism)
+#   test_determinism.sh PHYSREG --record DIR         write the outputs into DIR (2 threads)
+#   test_determinism.sh PHYSREG --against DIR        the outputs of this build against a recorded DIR
 set -uo pipefail
 physreg=$1
+mode=${2:-}
+target=${3:-}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 failures=0
+ref_root="$work/t1" # the reference run's folder as its summaries name it
 run_all() { # DIR
   local out=$1 p="$physreg --quiet --no-report"
   mkdir -p "$out"
@@ -21,17 +30,33 @@ run_all() { # DIR
   $p register-surface --dataset "$out/ph" --visible 50 --cell-size 10 --max-steps-per-plateau 20 -o "$out/rs" >/dev/null &&
   $p register-images --dataset "$out/ph" --cycles 2 --cell-size 8 --baselines all -o "$out/ri" >/dev/null
 }
-for t in 1 2; do
-  if ! OMP_NUM_THREADS=$t run_all "$work/t$t" 2>"$work/err$t.txt"; then
-    echo "FAILED: the commands on $t thread(s):"; cat "$work/err$t.txt"; exit 1
-  fi
-done
+case "$mode" in
+  --record)
+    [ -n "$target" ] && [ ! -e "$target" ] || { echo "--record needs a folder that does not exist yet"; exit 2; }
+    mkdir -p "$target" && target=$(cd "$target" && pwd) # absolute: the summaries name their inputs so
+    OMP_NUM_THREADS=2 run_all "$target" || { echo "FAILED: the commands"; exit 1; }
+    echo "recorded $(cd "$target" && find . -type f | wc -l) files in $target"; exit 0 ;;
+  --against)
+    [ -d "$target" ] || { echo "--against needs a recorded folder"; exit 2; }
+    OMP_NUM_THREADS=2 run_all "$work/t2" 2>"$work/err2.txt" || { echo "FAILED: the commands:"; cat "$work/err2.txt"; exit 1; }
+    # The recorded run is the reference ("t1"); a symbolic link keeps the comparison below as it is.
+    ref_root=$(cd "$target" && pwd)
+    ln -s "$ref_root" "$work/t1"
+    ;;
+  "")
+    for t in 1 2; do
+      if ! OMP_NUM_THREADS=$t run_all "$work/t$t" 2>"$work/err$t.txt"; then
+        echo "FAILED: the commands on $t thread(s):"; cat "$work/err$t.txt"; exit 1
+      fi
+    done ;;
+  *) echo "unknown option $mode"; exit 2 ;;
+esac
 compared=0
 while IFS= read -r f; do
   case "$f" in
     */report.html) continue ;;
     */summary.json)
-      python3 - "$work/t1/$f" "$work/t2/$f" "$work/t1" "$work/t2" <<'PY' || { echo "FAILED: $f differs between 1 and 2 threads"; failures=$((failures + 1)); }
+      python3 - "$work/t1/$f" "$work/t2/$f" "$ref_root" "$work/t2" <<'PY' || { echo "FAILED: $f differs from the reference run"; failures=$((failures + 1)); }
 import json, math, sys
 # The runs' own folders appear in input paths: compare them as one.
 a, b = (json.loads(open(p).read().replace(d, "RUN")) for p, d in ((sys.argv[1], sys.argv[3]), (sys.argv[2], sys.argv[4])))
@@ -52,12 +77,12 @@ walk(a, b, "", False)
 if bad: print("  differing:", ", ".join(bad[:10])); sys.exit(1)
 PY
       ;;
-    *) cmp -s "$work/t1/$f" "$work/t2/$f" || { echo "FAILED: $f differs between 1 and 2 threads"; failures=$((failures + 1)); } ;;
+    *) cmp -s "$work/t1/$f" "$work/t2/$f" || { echo "FAILED: $f differs from the reference run"; failures=$((failures + 1)); } ;;
   esac
   compared=$((compared + 1))
-done < <(cd "$work/t1" && find . -type f | sort)
+done < <(cd "$work/t1/" && find . -type f | sort)
 # Both runs wrote the same set of files.
-diff <(cd "$work/t1" && find . -type f | sort) <(cd "$work/t2" && find . -type f | sort) >/dev/null || { echo "FAILED: different files"; failures=$((failures + 1)); }
+diff <(cd "$work/t1/" && find . -type f | sort) <(cd "$work/t2" && find . -type f | sort) >/dev/null || { echo "FAILED: different files"; failures=$((failures + 1)); }
 echo "$compared files compared, $failures differ"
 [ "$compared" -gt 40 ] || { echo "FAILED: too few files compared"; exit 1; }
 exit $((failures > 0))
