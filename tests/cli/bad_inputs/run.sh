@@ -90,7 +90,10 @@ fi
 # ---------------------------------------------------------------- valid fixtures to damage
 # The small phantom: ctest's shared fixture (tests/cli/make_phantom_fixture.sh, read only here), or our own.
 if [ -n "${PHYSREG_TEST_PHANTOM:-}" ] && [ -f "$PHYSREG_TEST_PHANTOM/manifest.json" ]; then
-  ph="$PHYSREG_TEST_PHANTOM"
+  # Copied into our own folder: the read-only cases run as user nobody, who may not be able to
+  # enter the build tree (CI may build in a folder only root can enter).
+  cp -r "$PHYSREG_TEST_PHANTOM" "$W/ph" || { echo "fixture: cannot copy $PHYSREG_TEST_PHANTOM"; exit 1; }
+  ph="$W/ph"
 else
   "$physreg" -q phantom --preset small --seed 3 --depths 8,10,8,6 -o "$W/ph" >/dev/null 2>&1 || { echo "fixture: phantom failed"; exit 1; }
   ph="$W/ph"
