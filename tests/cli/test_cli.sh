@@ -181,7 +181,9 @@ expect_ok "info reads a phantom image" "$physreg" info "$ph/states/B/labels.nii.
 expect_error "phantom: existing output" "not empty" "$physreg" phantom --preset small -o "$ph"
 # One run checks both: one depth makes one compression, and --force replaces a folder that is not empty.
 mkdir -p "$work/ph1/states/B"; echo stale > "$work/ph1/stale.txt"
-expect_ok "phantom: one compression, --force replaces" "$physreg" --log-level warn phantom --preset small --depths 6 --no-calculix -o "$work/ph1" --force
+# With a 1 s heartbeat, the quiet compression solve reports its own Newton iterations.
+expect_ok "phantom: one compression, --force replaces" env PHYSREG_PROGRESS_HEARTBEAT_S=1 "$physreg" --log-level info phantom --preset small --depths 6 --no-calculix -o "$work/ph1" --force
+grep -q "compression A: load step .*, Newton iteration" "$work/err.txt" && pass || failed "progress heartbeat names the load step and Newton iteration"
 expect_file "$work/ph1/states/A/mesh.vtu"
 [ ! -e "$work/ph1/stale.txt" ] && pass || failed "--force leaves the old folder's files"
 [ ! -e "$work/ph1/states/B" ] && pass || failed "one depth makes one compression"
