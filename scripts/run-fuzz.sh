@@ -63,6 +63,20 @@ for t in targets:
                     "peak_rss_mb": int(stat.get("peak_rss_mb", 0)), "findings": findings, "ok": not crashed})
     print(f"{t:22s} {'ok' if not crashed else 'FOUND':6s} {summary[-1]['executions']:>10d} runs  cov {summary[-1]['coverage_edges']:>5d}"
           f"  ft {summary[-1]['features']:>6d}  corpus {summary[-1]['corpus_inputs']:>5d}  {' '.join(findings)}")
+# A finding on a machine we cannot reach (CI) must be reproducible from its log alone: print the
+# sanitizer's report and the input, base64-encoded (`base64 -d > input; build-fuzz/bin/fuzz_T input`).
+import base64
+for entry in summary:
+    if entry["ok"]:
+        continue
+    log = (build / f"fuzz_{entry['target']}.log").read_text(errors="replace").splitlines()
+    report = [l for l in log if "ERROR:" in l or "runtime error" in l or l.lstrip().startswith("#") and " in " in l]
+    print(f"--- {entry['target']}: sanitizer report (first 30 lines)")
+    print("\n".join(report[:30]))
+    for name in entry["findings"]:
+        data = (build / "findings" / entry["target"] / name).read_bytes()
+        print(f"--- {entry['target']}/{name} ({len(data)} bytes), base64:")
+        print(base64.b64encode(data[:65536]).decode())
 (build / "fuzz-summary.json").write_text(json.dumps(summary, indent=2) + "\n")
 sys.exit(1 if failed else 0)
 PY

@@ -4,6 +4,7 @@
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
 
+#include <limits>
 #include <cmath>
 #include <cerrno>
 #include <cstring>
@@ -289,7 +290,10 @@ SurfaceMesh read_obj(const fs::path& path, const std::string& what)
             while (s >> token) {
                 const long v = std::strtol(token.c_str(), nullptr, 10); // "v/vt/vn": the vertex index
                 if (v == 0) fail("{}: line {}: bad face index '{}'", what, line_number, token);
-                polygon.push_back(static_cast<std::int32_t>(v > 0 ? v - 1 : static_cast<long>(mesh.vertices.size()) + v));
+                const long index = v > 0 ? v - 1 : static_cast<long>(mesh.vertices.size()) + v;
+                if (index < 0 || index > std::numeric_limits<std::int32_t>::max())
+                    fail("{}: line {}: face index '{}' is out of range", what, line_number, token);
+                polygon.push_back(static_cast<std::int32_t>(index));
             }
             if (polygon.size() < 3) fail("{}: line {}: face with {} vertices", what, line_number, polygon.size());
             for (std::size_t k = 1; k + 1 < polygon.size(); ++k) {
@@ -401,13 +405,14 @@ SurfaceMesh read_vtk_polydata(const fs::path& path, const std::string& what)
             const bool label = name == "label" || name == "feature" || name == "region" || name == "inside_label";
             if (name == "outside_label" && cells && components == 1) {
                 if (mesh.labels.size() != face_label.size()) mesh.labels.assign(face_label.size(), {0, 0});
-                for (std::size_t t = 0; t < face_label.size(); ++t) mesh.labels[t][1] = static_cast<std::int32_t>(values[static_cast<std::size_t>(face_label[t])]);
+                for (std::size_t t = 0; t < face_label.size(); ++t) mesh.labels[t][1] = to_integer<std::int32_t>(values[static_cast<std::size_t>(face_label[t])], what, "a cell label");
             } else if (label && components == 1) {
                 if (cells) {
                     if (mesh.labels.size() != face_label.size()) mesh.labels.assign(face_label.size(), {0, 0});
-                    for (std::size_t t = 0; t < face_label.size(); ++t) mesh.labels[t][0] = static_cast<std::int32_t>(values[static_cast<std::size_t>(face_label[t])]);
+                    for (std::size_t t = 0; t < face_label.size(); ++t) mesh.labels[t][0] = to_integer<std::int32_t>(values[static_cast<std::size_t>(face_label[t])], what, "a cell label");
                 } else {
-                    mesh.vertex_labels.assign(values.begin(), values.end());
+                    mesh.vertex_labels.resize(values.size());
+                    for (std::size_t i = 0; i < values.size(); ++i) mesh.vertex_labels[i] = to_integer<std::int32_t>(values[i], what, "a point label");
                 }
             }
         } else if (keyword == "NORMALS" || keyword == "VECTORS") {
