@@ -167,7 +167,7 @@ void add_subcommand_demo(CLI::App& app)
     sub->add_option("-o,--output", o->output, "Output directory (created)")->capture_default_str();
     sub->add_flag("--quick", o->quick, "Small preset and grids (≈ 1 min; for tests)");
     sub->add_flag("--rebuild-phantom", o->rebuild, "Rebuild the phantom dataset even if OUTPUT/phantom holds one from an earlier run");
-    sub->add_option("--max-evaluations", o->evaluations, "Estimation budget (default 12; quick 4)");
+    sub->add_option("--max-evaluations", o->evaluations, "Estimation budget (default 8; quick 4)");
     sub->add_option("--seed", o->seed, "Seed of the phantom (its ground-truth materials, mesh and noise; default 1)");
     sub->add_flag("--json", o->json, "Print the JSON summary on stdout");
     sub->callback([o] {
@@ -187,13 +187,14 @@ void add_subcommand_demo(CLI::App& app)
         auto step = [&](int n, const std::string& text) { logger()->info("[{}/{}] {} ({:.0f} s so far)", n, steps_total, text, seconds_since(start)); };
         // Settings: paper 000's grids on the full phantom; small ones for --quick.
         const std::string preset = o->quick ? "small" : "cirs057a";
-        const Index3 grid = o->quick ? Index3{36, 27, 12} : Index3{74, 54, 18};
-        const Index3 coarse_grid = o->quick ? Index3{12, 9, 6} : Index3{24, 18, 18};
-        // Tool travel on the skin from first contact, as in the phantom's compressions (up to 25 mm; the
-        // liver model meets the tool only once the gel above the liver is crossed).
+        // The body model (gel with the organs inside, bone held, base on the table): 5 mm cells on the
+        // CIRS body, 10 mm coarse; about half that resolution for --quick.
+        const Index3 grid = o->quick ? Index3{27, 20, 13} : Index3{54, 40, 26};
+        const Index3 coarse_grid = o->quick ? Index3{14, 10, 7} : Index3{27, 20, 13};
+        // Tool travel on the skin from first contact, as in the phantom's compressions (up to 25 mm).
         const std::vector<double> depths = o->quick ? std::vector<double>{4, 8, 12, 15} : std::vector<double>{5, 10, 15, 20, 25};
-        const int evaluations = o->evaluations > 0 ? o->evaluations : (o->quick ? 4 : 12);
-        const int track_steps = o->quick ? 5 : 20;
+        const int evaluations = o->evaluations > 0 ? o->evaluations : (o->quick ? 4 : 8);
+        const int track_steps = o->quick ? 5 : 4;
         const std::vector<std::string> train{"A", "B", "C"}, validation{"D", "E"};
 
         step(1, "building blocks on the synthetic liver: meshes, surfaces, tetrahedra, a TLED indentation → meshing/");
@@ -233,7 +234,7 @@ void add_subcommand_demo(CLI::App& app)
         const LandmarkSet rest_landmarks = read_landmarks(dataset.path(dataset.state("rest").files.at("landmarks")));
         const auto train_cases = compression_cases(dataset, train), validation_cases = compression_cases(dataset, validation);
 
-        step(3, "coupling stiffnesses estimated on A, B, C (NLopt BOBYQA), checked on D, E → params.json");
+        step(3, "coupling stiffnesses and the gel's modulus estimated on A, B, C (NLopt BOBYQA), checked on D, E → params.json");
         auto t = clock::now();
         ModelParameters initial;
         initial.grid = grid;
@@ -411,9 +412,11 @@ void add_subcommand_demo(CLI::App& app)
         }
         text += "(rigid: fitted to the 11 noisy surface landmarks of each state, so its surface TRE is a fit residual)\n";
         const double total_s = seconds_since(start);
-        text += fmt::format("\nfitted k_c,s-t = {:.4g} N/m, k_c,s-v = {:.4g} N/m (paper 000: 600, 500); training TRE {:.3f} mm (paper 2.00), validation "
-                            "{:.3f} mm (paper 2.55)\n",
-                            fit.fitted.coupling.parenchyma_tumour_n_per_m, fit.fitted.coupling.parenchyma_vessel_n_per_m, fit.train_pooled.all.mean_mm,
+        text += fmt::format("\n{} model, {}x{}x{} cells (coarse {}x{}x{}); fitted k_c,s-t = {:.4g} N/m, k_c,s-v = {:.4g} N/m (paper 000: 600, 500), "
+                            "gel E {:.4g} Pa (start 1e5){}; training TRE {:.3f} mm (paper 2.00), validation {:.3f} mm (paper 2.55)\n",
+                            to_string(fit.fitted.region), grid[0], grid[1], grid[2], coarse_grid[0], coarse_grid[1], coarse_grid[2],
+                            fit.fitted.coupling.parenchyma_tumour_n_per_m, fit.fitted.coupling.parenchyma_vessel_n_per_m, fit.fitted.body_young_pa,
+                            fit.at_bound.empty() ? "" : fmt::format(" (AT A BOUND: {})", fmt::join(fit.at_bound, ", ")), fit.train_pooled.all.mean_mm,
                             fit.validation_pooled.all.mean_mm);
         text += fmt::format("landmarks left at rest (how far D, E moved them): {:.3f} mm; enrichment database {} conditions, {:.1f} MB, blend {}\n",
                             fit.validation_at_rest.all.mean_mm, db.conditions.size(), double(database_bytes) / 1e6, blend);
@@ -425,6 +428,7 @@ void add_subcommand_demo(CLI::App& app)
                         {"seed", o->seed},
                         {"methods", table},
                         {"fitted", parameters_json(fit.fitted)},
+                        {"fit_at_bound", fit.at_bound},
                         {"train_tre", json::parse(tre_stats_json(fit.train_pooled))},
                         {"validation_tre", json::parse(tre_stats_json(fit.validation_pooled))},
                         {"validation_landmarks_at_rest", json::parse(tre_stats_json(fit.validation_at_rest))},

@@ -32,7 +32,7 @@ void add_subcommand_estimate(CLI::App& app)
     struct Options : CommonOptions {
         std::string dataset, train = "A,B,C", validate = "D,E", output, report_file, algorithm = "bobyqa";
         ModelOptions model;
-        bool fit_moduli = false;
+        bool fit_moduli = false, fixed_body = false;
         int max_evaluations = 30;
         double k_min = 1.0, k_max = 1e5;
     };
@@ -44,6 +44,8 @@ void add_subcommand_estimate(CLI::App& app)
     sub->add_option("--validate", o->validate, "Validation compressions (default D,E; \"none\" for none)");
     add_model_options(sub, o->model);
     sub->add_flag("--fit-moduli", o->fit_moduli, "Also fit the tumour and vessel Young's moduli (log-scaled, 1e4 … 1e8 Pa)");
+    sub->add_flag("--fixed-body-modulus", o->fixed_body, "Region body: keep the gel's modulus (--body-modulus) instead of fitting it "
+                                                        "(log-scaled, 2e3 … 2e6 Pa; fitted by default)");
     sub->add_option("--k-bounds", [o](const std::vector<std::string>& v) {
         if (v.size() != 2) return false;
         const auto low = parse_number(v[0]), high = parse_number(v[1]);
@@ -63,13 +65,14 @@ void add_subcommand_estimate(CLI::App& app)
         const DatasetState& rest = dataset.state("rest");
         const LabelVolume labels = read_label_volume(dataset.path(rest.files.at("labels")));
         ModelParameters defaults;
-        if (o->model.grid.empty()) defaults.grid = default_liver_grid(labels, dataset.roles); // from the dataset
+        if (o->model.grid.empty()) defaults.grid = default_model_grid(labels, dataset.roles, parse_model_region(o->model.region)); // from the dataset
         const ModelParameters initial = model_parameters(o->model, defaults);
         const auto train = compression_cases(dataset, split_names(o->train, "--train"));
         const auto validation = o->validate == "none" ? std::vector<CompressionCase>{} : compression_cases(dataset, split_names(o->validate, "--validate"));
         const LandmarkSet rest_landmarks = read_landmarks(dataset.path(rest.files.at("landmarks")));
         EstimationOptions options;
         options.fit_moduli = o->fit_moduli;
+        options.fit_body_modulus = !o->fixed_body;
         options.k_min_n_per_m = o->k_min;
         options.k_max_n_per_m = o->k_max;
         options.algorithm = o->algorithm;
@@ -88,6 +91,8 @@ void add_subcommand_estimate(CLI::App& app)
         summary["objective"] = "mean TRE over every landmark of the training compressions, mm";
         summary["objective_mm"] = r.objective_mm;
         summary["fitted"] = parameters_json(r.fitted);
+        summary["free_parameters"] = r.free_parameters;
+        summary["at_bound"] = r.at_bound; // fitted parameters that ended at a bound (the optimum may lie beyond)
         summary["mesh_fingerprint"] = r.fingerprint;
         summary["train"] = json::parse(tre_stats_json(r.train_pooled));
         if (!r.validation.empty()) summary["validation"] = json::parse(tre_stats_json(r.validation_pooled));
@@ -96,7 +101,8 @@ void add_subcommand_estimate(CLI::App& app)
         for (const auto& [name, rep] : r.train) summary["per_compression"][name] = json::parse(tre_stats_json(rep));
         for (const auto& [name, rep] : r.validation) summary["per_compression"][name] = json::parse(tre_stats_json(rep));
         const json fit = {{"objective_mm", r.objective_mm}, {"train", summary["train"]}, {"validation", summary.value("validation", json())},
-                          {"optimiser", r.optimiser}, {"evaluations", r.history.size()}, {"dataset", o->dataset}};
+                          {"optimiser", r.optimiser}, {"evaluations", r.history.size()}, {"dataset", o->dataset},
+                          {"at_bound", r.at_bound}};
         write_model_parameters(o->output, r.fitted, r.fingerprint, fit.dump());
         if (!o->report_file.empty()) {
             json full = summary;
@@ -106,9 +112,12 @@ void add_subcommand_estimate(CLI::App& app)
             write_atomically(o->report_file, [&](const fs::path& tmp) { std::ofstream(tmp) << full.dump(2) << "\n"; });
         }
         std::cerr << fmt::format("estimate ({}, {} evaluations, {:.1f} s; {}): k_c,s-t = {:.4g} N/m, k_c,s-v = {:.4g} N/m, "
-                                 "E tumour {:.4g} Pa, E vessel {:.4g} Pa\n",
+                                 "E tumour {:.4g} Pa, E vessel {:.4g} Pa, E body {:.4g} Pa ({} model)\n",
                                  r.optimiser, r.history.size(), r.seconds, r.stop_reason, r.fitted.coupling.parenchyma_tumour_n_per_m,
-                                 r.fitted.coupling.parenchyma_vessel_n_per_m, r.fitted.tumour_young_pa, r.fitted.vessel_young_pa);
+                                 r.fitted.coupling.parenchyma_vessel_n_per_m, r.fitted.tumour_young_pa, r.fitted.vessel_young_pa,
+                                 r.fitted.body_young_pa, to_string(r.fitted.region));
+        if (!r.at_bound.empty())
+            std::cerr << fmt::format("  WARNING: {} ended at a bound; the optimum may lie beyond it\n", fmt::join(r.at_bound, ", "));
         for (const auto& [name, rep] : r.train) std::cerr << fmt::format("  train {:<6} {}\n", name, tre_line(rep));
         std::cerr << fmt::format("  TRAIN        {}\n", tre_line(r.train_pooled));
         for (const auto& [name, rep] : r.validation) std::cerr << fmt::format("  validate {:<3} {}\n", name, tre_line(rep));
@@ -157,7 +166,7 @@ void add_subcommand_register_compression(CLI::App& app)
         const bool contact = prediction.max_displacement_mm > 1e-6;
         if (!contact)
             logger()->warn("compression {}: no contact: the tool never touches the model (largest displacement {:.2g} mm), so the "
-                           "prediction is the landmarks at rest (the liver-only model: the tool presses the skin)",
+                           "prediction is the landmarks at rest (with --region liver: the tool presses the skin, not the liver)",
                            o->state, prediction.max_displacement_mm);
         bar.update(0.8, "writing outputs");
         MeshData data;
@@ -168,6 +177,7 @@ void add_subcommand_register_compression(CLI::App& app)
         const SampledField field = sample_displacement_field(model.mesh, prediction.displacement_mm, geometry);
         write_displacement_field(staging.path() / "displacement.nii.gz", field.field);
         const TreReport tre = compute_tre(prediction.landmarks, cases[0].truth, "compression " + o->state);
+        const TreReport at_rest = compute_tre(rest_landmarks, cases[0].truth, "compression " + o->state + " (landmarks at rest)");
         json summary = {{"state", o->state},
                         {"model", parameters_json(p)},
                         {"nodes", model.mesh.node_count()},
@@ -180,6 +190,8 @@ void add_subcommand_register_compression(CLI::App& app)
                         {"tool_contact", contact ? "contact" : "no contact"},
                         {"max_coupling_gap_mm", prediction.max_coupling_gap_mm},
                         {"tre_against_dataset", json::parse(tre_stats_json(tre))},
+                        {"tre_landmarks_at_rest", json::parse(tre_stats_json(at_rest))}, // the baseline: doing nothing
+                        {"slower_tool_ramps", prediction.slower_ramps},
                         {"files", {{"mesh", "mesh.vtu"}, {"landmarks", "landmarks.csv"}, {"displacement", "displacement.nii.gz"}}},
                         {"units", "mm, LPS; displacement field in the rest (pre-operative) space: x → x + u(x)"}};
         summary["command"] = "register-compression";
@@ -190,9 +202,9 @@ void add_subcommand_register_compression(CLI::App& app)
         write_html_report(staging.path(), o->output);
         staging.commit();
         bar.finish();
-        std::cerr << fmt::format("register-compression {} ({}): {} iterations, {:.2f} s, max displacement {:.2f} mm{}; TRE {}\n", o->state,
-                                 to_string(p.variant), prediction.iterations, prediction.seconds, prediction.max_displacement_mm,
-                                 contact ? "" : " (no contact)", tre_line(tre));
+        std::cerr << fmt::format("register-compression {} ({} {}): {} iterations, {:.2f} s, max displacement {:.2f} mm{}; TRE {}; landmarks at "
+                                 "rest {:.3f} mm\n", o->state, to_string(p.region), to_string(p.variant), prediction.iterations, prediction.seconds,
+                                 prediction.max_displacement_mm, contact ? "" : " (no contact)", tre_line(tre), at_rest.all.mean_mm);
         if (o->json) std::cout << summary.dump(2) << std::endl;
     });
 }

@@ -27,7 +27,11 @@ void add_model_options(CLI::App* sub, ModelOptions& m)
 {
     sub->add_option("--variant", m.variant, "Model: homogeneous (Han et al.), shared-nodes (per-element materials) or coupled (MLS "
                                             "penalty coupling, paper 000; default)");
-    sub->add_option("--grid", m.grid, "Cells over the liver's bounding box per image axis (default: 74x54x18, or one cell per voxel where the liver spans fewer voxels)");
+    sub->add_option("--region", m.region, "What the model covers: body (the gel body with the organs inside, bone held, base on the table; "
+                                          "default) or liver (the liver alone, posterior surface held)");
+    sub->add_option("--grid", m.grid, "Cells over the region's bounding box per image axis (default: body 54x40x26, liver 74x54x18, or one "
+                                      "cell per voxel where the region spans fewer voxels)");
+    sub->add_option("--body-modulus", m.body_modulus, "Young's modulus of the gel body, Pa (region body; default 2e4)");
     sub->add_option("--k-tumour", m.k_tumour, "Parenchyma–tumour coupling stiffness k_c,s-t, N/m (default 600, paper 000)");
     sub->add_option("--k-vessel", m.k_vessel, "Parenchyma–vessel coupling stiffness k_c,s-v, N/m (default 500, paper 000)");
     sub->add_option("--support-radius", m.support_radius, "MLS support radius, element sizes (default 1.25)");
@@ -55,6 +59,8 @@ PredictionOptions prediction_options(const ModelOptions& m)
 ModelParameters model_parameters(const ModelOptions& m, ModelParameters p)
 {
     p.variant = parse_model_variant(m.variant);
+    p.region = parse_model_region(m.region);
+    if (m.body_modulus) p.body_young_pa = *m.body_modulus;
     if (!m.grid.empty()) p.grid = parse_grid_dims(m.grid, "--grid");
     if (m.k_tumour) p.coupling.parenchyma_tumour_n_per_m = *m.k_tumour;
     if (m.k_vessel) p.coupling.parenchyma_vessel_n_per_m = *m.k_vessel;
@@ -70,9 +76,10 @@ ModelParameters model_parameters(const ModelOptions& m, ModelParameters p)
 json parameters_json(const ModelParameters& p)
 {
     return {{"variant", to_string(p.variant)},
+            {"region", to_string(p.region)},
             {"k_c_s_t_n_per_m", p.coupling.parenchyma_tumour_n_per_m},
             {"k_c_s_v_n_per_m", p.coupling.parenchyma_vessel_n_per_m},
-            {"young_modulus_pa", {{"parenchyma", p.parenchyma_young_pa}, {"tumour", p.tumour_young_pa}, {"vessel", p.vessel_young_pa}}},
+            {"young_modulus_pa", {{"parenchyma", p.parenchyma_young_pa}, {"tumour", p.tumour_young_pa}, {"vessel", p.vessel_young_pa}, {"body", p.body_young_pa}}},
             {"grid_cells", {p.grid[0], p.grid[1], p.grid[2]}}};
 }
 
@@ -94,12 +101,13 @@ LoadedModel load_model(const std::string& dataset, const std::string& parameters
     std::string fingerprint;
     if (!parameters_file.empty()) {
         p = read_model_parameters(parameters_file, &fingerprint);
-        if (options.variant != "coupled" || !options.grid.empty() || options.k_tumour || options.k_vessel)
-            fail("--parameters: the model comes from the parameter file; drop --variant/--grid/--k-tumour/--k-vessel");
+        if (options.variant != "coupled" || options.region != "body" || !options.grid.empty() || options.k_tumour || options.k_vessel ||
+            options.body_modulus)
+            fail("--parameters: the model comes from the parameter file; drop --variant/--region/--grid/--k-tumour/--k-vessel/--body-modulus");
     } else {
         // Without --grid the grid comes from the dataset (paper 000's, or one cell per voxel on a
         // coarse image such as the small preset's).
-        if (options.grid.empty()) p.grid = default_liver_grid(out.labels, out.dataset.roles);
+        if (options.grid.empty()) p.grid = default_model_grid(out.labels, out.dataset.roles, parse_model_region(options.region));
         p = model_parameters(options, p);
     }
     out.model = build_liver_model(out.labels, out.dataset.roles, p, out.dataset.path(rest.files.at("labels")).string());

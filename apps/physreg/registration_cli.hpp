@@ -20,8 +20,8 @@ namespace physreg::cli {
 std::vector<std::string> split_names(const std::string& text, const std::string& option);
 
 struct ModelOptions {
-    std::string variant = "coupled", grid;
-    std::optional<double> k_tumour, k_vessel, support_radius;
+    std::string variant = "coupled", region = "body", grid;
+    std::optional<double> k_tumour, k_vessel, support_radius, body_modulus;
     double tool_speed = PredictionOptions{}.tool_speed_per_cell;
     double tolerance_mm = PredictionOptions{}.equilibrium.displacement_tolerance_mm;
     double residual = PredictionOptions{}.equilibrium.residual_tolerance;

@@ -59,14 +59,12 @@ Indenter condition_tool(const Indenter& shape, const EnrichmentCondition& c, dou
     return tool;
 }
 
-namespace {
-
-} // namespace
-
 std::string enrichment_model_json(const LiverModel& fine, const LiverModel& coarse)
 {
     const auto& p = fine.parameters;
     nlohmann::json j = {{"variant", to_string(p.variant)},
+                        {"region", to_string(p.region)},
+                        {"body_young_pa", p.body_young_pa},
                         {"k_c_s_t_n_per_m", p.coupling.parenchyma_tumour_n_per_m},
                         {"k_c_s_v_n_per_m", p.coupling.parenchyma_vessel_n_per_m},
                         {"young_modulus_pa", {{"parenchyma", p.parenchyma_young_pa}, {"tumour", p.tumour_young_pa}, {"vessel", p.vessel_young_pa}}},
@@ -114,7 +112,7 @@ EnrichmentDatabase build_sequence(const LiverModel& fine, const LiverModel& coar
         auto solver = std::make_unique<StaticSolver>(*m.tled, StaticSolverOptions{options.method, options.equilibrium, options.newton});
         solver->set_coupling(m.coupling.empty() ? nullptr : &m.coupling);
         Loads loads;
-        loads.constraints.push_back({"posterior_support", m.fixed_nodes, {true, true, true}, Vec3::Zero()});
+        loads.constraints = m.supports();
         loads.indenters.push_back(tool);
         solver->set_loads(loads);
         return solver;

@@ -35,6 +35,8 @@ void EstimationOptions::validate() const
         fail("coupling stiffness bounds must satisfy 0 < min < max < ∞ N/m (got {} … {})", k_min_n_per_m, k_max_n_per_m);
     if (!(modulus_min_pa > 0) || !(modulus_max_pa > modulus_min_pa) || !std::isfinite(modulus_max_pa))
         fail("Young's modulus bounds must satisfy 0 < min < max < ∞ Pa (got {} … {})", modulus_min_pa, modulus_max_pa);
+    if (!(body_modulus_min_pa > 0) || !(body_modulus_max_pa > body_modulus_min_pa) || !std::isfinite(body_modulus_max_pa))
+        fail("body modulus bounds must satisfy 0 < min < max < ∞ Pa (got {} … {})", body_modulus_min_pa, body_modulus_max_pa);
     if (algorithm != "bobyqa" && algorithm != "neldermead") fail("optimiser '{}' is not one of bobyqa, neldermead", algorithm);
     if (max_evaluations < 1) fail("max evaluations must be ≥ 1 (got {})", max_evaluations);
     if (!(x_tolerance_decades > 0)) fail("parameter tolerance must be > 0 decades");
@@ -42,8 +44,10 @@ void EstimationOptions::validate() const
 
 std::vector<std::pair<std::string, TreReport>> evaluate_cases(const LabelVolume& rest_labels, const LabelRoles& roles,
                                                               const ModelParameters& parameters, const LandmarkSet& rest_landmarks,
-                                                              const std::vector<CompressionCase>& cases, const PredictionOptions& options)
+                                                              const std::vector<CompressionCase>& cases, const PredictionOptions& options,
+                                                              std::vector<std::vector<double>>* warm)
 {
+    if (warm && warm->size() != cases.size()) fail("evaluate cases: {} warm starts for {} cases", warm->size(), cases.size());
     const LiverModel model = build_liver_model(rest_labels, roles, parameters, "rest labels");
     std::vector<std::pair<std::string, TreReport>> out(cases.size());
     std::vector<std::string> errors(cases.size());
@@ -52,16 +56,20 @@ std::vector<std::pair<std::string, TreReport>> evaluate_cases(const LabelVolume&
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
     for (std::size_t c = 0; c < cases.size(); ++c) {
         try {
-            const auto prediction = predict_compression(model, cases[c].tool, rest_landmarks, options, "compression " + cases[c].name);
+            PredictionOptions start = options;
+            if (warm) start.initial_displacement_mm = (*warm)[c];
+            auto prediction = predict_compression(model, cases[c].tool, rest_landmarks, start, "compression " + cases[c].name);
+            if (warm) (*warm)[c] = std::move(prediction.displacement_mm);
             out[c] = {cases[c].name, compute_tre(prediction.landmarks, cases[c].truth, "compression " + cases[c].name)};
         } catch (const std::exception& e) {
             errors[c] = e.what();
         }
     }
     for (const auto& e : errors)
-        if (!e.empty()) fail("{} (model parameters: {}, k_c,s-t {:.4g} N/m, k_c,s-v {:.4g} N/m, E tumour {:.4g} Pa, E vessel {:.4g} Pa)", e,
-                             to_string(parameters.variant), parameters.coupling.parenchyma_tumour_n_per_m,
-                             parameters.coupling.parenchyma_vessel_n_per_m, parameters.tumour_young_pa, parameters.vessel_young_pa);
+        if (!e.empty()) fail("{} (model parameters: {} {}, k_c,s-t {:.4g} N/m, k_c,s-v {:.4g} N/m, E tumour {:.4g} Pa, E vessel {:.4g} Pa, E body {:.4g} Pa)",
+                             e, to_string(parameters.region), to_string(parameters.variant), parameters.coupling.parenchyma_tumour_n_per_m,
+                             parameters.coupling.parenchyma_vessel_n_per_m, parameters.tumour_young_pa, parameters.vessel_young_pa,
+                             parameters.body_young_pa);
     return out;
 }
 
@@ -81,31 +89,51 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
     result.fingerprint = build_liver_model(rest_labels, roles, initial, "rest labels").fingerprint;
     // Free parameters, as log10 values.
     struct Free {
+        const char* name;
         double* (*slot)(ModelParameters&);
         double lo, hi;
     };
     std::vector<Free> free;
     const bool coupled = initial.variant == ModelVariant::coupled;
     if (coupled && options.fit_coupling) {
-        free.push_back({[](ModelParameters& p) { return &p.coupling.parenchyma_tumour_n_per_m; }, options.k_min_n_per_m, options.k_max_n_per_m});
-        free.push_back({[](ModelParameters& p) { return &p.coupling.parenchyma_vessel_n_per_m; }, options.k_min_n_per_m, options.k_max_n_per_m});
+        free.push_back({"k_c_s_t_n_per_m", [](ModelParameters& p) { return &p.coupling.parenchyma_tumour_n_per_m; }, options.k_min_n_per_m, options.k_max_n_per_m});
+        free.push_back({"k_c_s_v_n_per_m", [](ModelParameters& p) { return &p.coupling.parenchyma_vessel_n_per_m; }, options.k_min_n_per_m, options.k_max_n_per_m});
     }
     if (options.fit_moduli && initial.variant != ModelVariant::homogeneous) {
-        free.push_back({[](ModelParameters& p) { return &p.tumour_young_pa; }, options.modulus_min_pa, options.modulus_max_pa});
-        free.push_back({[](ModelParameters& p) { return &p.vessel_young_pa; }, options.modulus_min_pa, options.modulus_max_pa});
+        free.push_back({"tumour_young_pa", [](ModelParameters& p) { return &p.tumour_young_pa; }, options.modulus_min_pa, options.modulus_max_pa});
+        free.push_back({"vessel_young_pa", [](ModelParameters& p) { return &p.vessel_young_pa; }, options.modulus_min_pa, options.modulus_max_pa});
     }
+    if (options.fit_body_modulus && initial.region == ModelRegion::body)
+        free.push_back({"body_young_pa", [](ModelParameters& p) { return &p.body_young_pa; }, options.body_modulus_min_pa, options.body_modulus_max_pa});
+    for (const auto& f : free) result.free_parameters.push_back(f.name);
     auto parameters_at = [&](const std::vector<double>& x) {
         ModelParameters p = initial;
         for (std::size_t i = 0; i < free.size(); ++i) *free[i].slot(p) = std::pow(10.0, x[i]);
         return p;
     };
     const int budget = free.empty() ? 1 : options.max_evaluations;
+    constexpr double infeasible_mm = 1e3;
     std::string failure;
+    // Each evaluation starts from the previous one's equilibria: nearby parameters move the
+    // tissue little, so relaxation needs a fraction of the iterations from rest.
+    std::vector<std::vector<double>> warm(train.size());
     double best_value = 0.0;
     std::vector<std::pair<std::string, TreReport>> best_reports;
     auto objective = [&](const std::vector<double>& x) {
         const ModelParameters p = parameters_at(x);
-        const auto reports = evaluate_cases(rest_labels, roles, p, rest_landmarks, train, options.prediction);
+        std::vector<std::pair<std::string, TreReport>> reports;
+        try {
+            reports = evaluate_cases(rest_labels, roles, p, rest_landmarks, train, options.prediction, &warm);
+        } catch (const Error& e) {
+            // Parameters under which the model folds an element are infeasible, not a failed
+            // estimation: a penalty far above any TRE steers the optimiser away. The start point
+            // (the first evaluation) must be feasible.
+            if (result.history.empty() || std::string(e.what()).find("inverted") == std::string::npos) throw;
+            logger()->warn("estimation: evaluation {} folds an element; treated as infeasible: {}", result.history.size() + 1, e.what());
+            result.history.push_back({p, infeasible_mm});
+            ++result.infeasible_evaluations;
+            return infeasible_mm;
+        }
         std::vector<TreReport> pooled;
         for (const auto& r : reports) pooled.push_back(r.second);
         const double value = pool_tre(pooled).all.mean_mm;
@@ -113,9 +141,9 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
         result.history.push_back({p, value});
         if (progress)
             progress(std::min(1.0, double(result.history.size()) / double(budget)),
-                     fmt::format("evaluation {}: k_s-t {:.4g} N/m, k_s-v {:.4g} N/m, E_t {:.3g} Pa, E_v {:.3g} Pa → mean TRE {:.4f} mm",
+                     fmt::format("evaluation {}: k_s-t {:.4g} N/m, k_s-v {:.4g} N/m, E_t {:.3g} Pa, E_v {:.3g} Pa, E_body {:.3g} Pa → mean TRE {:.4f} mm",
                                  result.history.size(), p.coupling.parenchyma_tumour_n_per_m, p.coupling.parenchyma_vessel_n_per_m,
-                                 p.tumour_young_pa, p.vessel_young_pa, value));
+                                 p.tumour_young_pa, p.vessel_young_pa, p.body_young_pa, value));
         return value;
     };
     std::vector<double> x;
@@ -173,6 +201,12 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
         // The best point NLopt saw (it returns it in x).
         result.fitted = parameters_at(x);
         result.objective_mm = best;
+        for (std::size_t i = 0; i < free.size(); ++i)
+            if (x[i] - std::log10(free[i].lo) < 0.05 || std::log10(free[i].hi) - x[i] < 0.05) {
+                result.at_bound.push_back(free[i].name);
+                logger()->warn("estimation: {} = {:.4g} ends at its bound [{:.4g}, {:.4g}]: the optimum may lie beyond it", free[i].name,
+                               std::pow(10.0, x[i]), free[i].lo, free[i].hi);
+            }
     }
     // The training reports of the best evaluation (NLopt returns the best point it evaluated).
     result.train = best_value == result.objective_mm ? best_reports

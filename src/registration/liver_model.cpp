@@ -17,13 +17,15 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <algorithm>
+#include <limits>
 #include <set>
 
 namespace physreg {
 namespace {
 using json = nlohmann::json;
 constexpr const char* parameters_format = "physreg-model-parameters";
-constexpr int parameters_version = 1;
+constexpr int parameters_version = 2; // 2: region and the body's modulus (version 1 files are liver models)
 } // namespace
 
 ModelVariant parse_model_variant(const std::string& text)
@@ -44,11 +46,24 @@ std::string to_string(ModelVariant variant)
     return "?";
 }
 
+ModelRegion parse_model_region(const std::string& text)
+{
+    if (text == "body") return ModelRegion::body;
+    if (text == "liver") return ModelRegion::liver;
+    fail("model region '{}' is not one of body, liver", text);
+}
+
+std::string to_string(ModelRegion region)
+{
+    return region == ModelRegion::body ? "body" : "liver";
+}
+
 void ModelParameters::validate() const
 {
     coupling.validate();
     const std::pair<const char*, double> moduli[] = {
-        {"parenchyma Young's modulus", parenchyma_young_pa}, {"tumour Young's modulus", tumour_young_pa}, {"vessel Young's modulus", vessel_young_pa}};
+        {"parenchyma Young's modulus", parenchyma_young_pa}, {"tumour Young's modulus", tumour_young_pa}, {"vessel Young's modulus", vessel_young_pa},
+        {"body (gel) Young's modulus", body_young_pa}};
     for (const auto& [name, value] : moduli)
         if (!(value > 0) || !std::isfinite(value)) fail("{} must be a positive finite value in Pa (got {})", name, value);
     if (!(poisson_ratio > 0 && poisson_ratio < 0.5)) fail("Poisson's ratio must lie in (0, 0.5) (got {})", poisson_ratio);
@@ -66,9 +81,10 @@ void write_model_parameters(const std::filesystem::path& path, const ModelParame
     j["format"] = parameters_format;
     j["format_version"] = parameters_version;
     j["variant"] = to_string(p.variant);
+    j["region"] = to_string(p.region);
     j["coupling_stiffness_n_per_m"] = {{"parenchyma_tumour", p.coupling.parenchyma_tumour_n_per_m},
                                        {"parenchyma_vessel", p.coupling.parenchyma_vessel_n_per_m}};
-    j["young_modulus_pa"] = {{"parenchyma", p.parenchyma_young_pa}, {"tumour", p.tumour_young_pa}, {"vessel", p.vessel_young_pa}};
+    j["young_modulus_pa"] = {{"parenchyma", p.parenchyma_young_pa}, {"tumour", p.tumour_young_pa}, {"vessel", p.vessel_young_pa}, {"body", p.body_young_pa}};
     j["poisson_ratio"] = p.poisson_ratio;
     j["grid_cells"] = {p.grid[0], p.grid[1], p.grid[2]};
     j["mls_support_radius_cells"] = p.support_radius_cells;
@@ -102,17 +118,21 @@ ModelParameters read_model_parameters(const std::filesystem::path& path, std::st
         return keys;
     };
     require_known_keys(keys_of(j),
-                       {"format", "format_version", "variant", "coupling_stiffness_n_per_m", "young_modulus_pa", "poisson_ratio", "grid_cells",
+                       {"format", "format_version", "variant", "region", "coupling_stiffness_n_per_m", "young_modulus_pa", "poisson_ratio", "grid_cells",
                         "mls_support_radius_cells", "mesh_fingerprint", "fit"},
                        what, "the file");
     if (j.contains("coupling_stiffness_n_per_m"))
         require_known_keys(keys_of(j["coupling_stiffness_n_per_m"]), {"parenchyma_tumour", "parenchyma_vessel"}, what, "coupling_stiffness_n_per_m");
-    if (j.contains("young_modulus_pa")) require_known_keys(keys_of(j["young_modulus_pa"]), {"parenchyma", "tumour", "vessel"}, what, "young_modulus_pa");
+    if (j.contains("young_modulus_pa")) require_known_keys(keys_of(j["young_modulus_pa"]), {"parenchyma", "tumour", "vessel", "body"}, what, "young_modulus_pa");
     try {
         if (j.at("format").get<std::string>() != parameters_format) fail("parameter file '{}': format is not {}", path.string(), parameters_format);
-        if (j.at("format_version").get<int>() != parameters_version)
-            fail("parameter file '{}': format version {} (this physreg reads {})", path.string(), j.at("format_version").get<int>(), parameters_version);
+        const int version = j.at("format_version").get<int>();
+        if (version < 1 || version > parameters_version)
+            fail("parameter file '{}': format version {} (this physreg reads 1 to {})", path.string(), version, parameters_version);
         p.variant = parse_model_variant(j.at("variant").get<std::string>());
+        // Version 1 files predate the body model: they describe the liver alone.
+        p.region = version == 1 ? ModelRegion::liver : parse_model_region(j.at("region").get<std::string>());
+        if (version >= 2) p.body_young_pa = j.at("young_modulus_pa").at("body").get<double>();
         p.coupling.parenchyma_tumour_n_per_m = j.at("coupling_stiffness_n_per_m").at("parenchyma_tumour").get<double>();
         p.coupling.parenchyma_vessel_n_per_m = j.at("coupling_stiffness_n_per_m").at("parenchyma_vessel").get<double>();
         p.parenchyma_young_pa = j.at("young_modulus_pa").at("parenchyma").get<double>();
@@ -195,6 +215,93 @@ Index3 default_liver_grid(const LabelVolume& rest_labels, const LabelRoles& role
     return grid;
 }
 
+namespace {
+
+// Supports of a body model on its grid mesh: every node of a bone cell is held (the spine is
+// fixed, as in the ground truth), and the flat base — boundary faces facing posterior (+y) within
+// half a cell of the body's largest y — rests on a frictionless table (y held). Without bone the
+// base is bonded instead (x, y, z held), else nothing would stop the body sliding on the table.
+void set_body_supports(LiverModel& model, const std::set<std::int32_t>& bone_labels, const std::string& what)
+{
+    const VolumeMesh& mesh = model.mesh;
+    std::vector<char> fixed(mesh.node_count(), 0), table(mesh.node_count(), 0);
+    for (std::size_t c = 0; c < mesh.cell_count(); ++c)
+        if (bone_labels.count(mesh.cell_labels[c]))
+            for (const auto n : mesh.cell(c)) fixed[static_cast<std::size_t>(n)] = 1;
+    double y_max = -std::numeric_limits<double>::infinity();
+    for (const auto& x : mesh.nodes) y_max = std::max(y_max, x.y());
+    const double tolerance = 0.5 * model.cell_size_mm.y();
+    for (const auto& f : boundary_faces(mesh))
+        if (f.normal.y() > 0.5)
+            for (int a = 0; a < f.count; ++a) {
+                const auto n = static_cast<std::size_t>(f.nodes[a]);
+                if (mesh.nodes[n].y() >= y_max - tolerance) table[n] = 1;
+            }
+    const bool has_bone = std::find(fixed.begin(), fixed.end(), 1) != fixed.end();
+    if (std::find(table.begin(), table.end(), 1) == table.end())
+        fail("{}: the body has no flat posterior base to rest on (no boundary face facing +y within {:.2f} mm of its back)", what, tolerance);
+    if (!has_bone)
+        logger()->warn("{}: no bone label in the body model: its base is bonded to the table (x, y, z held) instead of sliding on it", what);
+    for (std::size_t n = 0; n < mesh.node_count(); ++n) {
+        if (fixed[n] || (table[n] && !has_bone)) model.fixed_nodes.push_back(static_cast<std::int32_t>(n));
+        else if (table[n]) model.table_nodes.push_back(static_cast<std::int32_t>(n));
+    }
+}
+
+void set_liver_supports(LiverModel& model, const std::vector<char>& fixed_vertex, const std::string& what)
+{
+    for (std::size_t n = 0; n < model.mesh.node_count(); ++n)
+        if (fixed_vertex[static_cast<std::size_t>(model.original_vertex[n])]) model.fixed_nodes.push_back(static_cast<std::int32_t>(n));
+    if (model.fixed_nodes.empty()) fail("{}: the liver has no posterior-facing surface to rest on", what);
+}
+
+// The body's labels: the named body role, or (none named) every label outside the other roles.
+std::set<std::int32_t> body_labels(const std::set<std::int32_t>& present, const LabelRoles& roles)
+{
+    if (!roles.body.empty()) return roles.body;
+    std::set<std::int32_t> body;
+    for (const auto l : present)
+        if (l != 0 && !roles.is_liver_tissue(l) && !roles.bone.count(l) && !roles.kidney.count(l)) body.insert(l);
+    return body;
+}
+
+} // namespace
+
+std::vector<NodeConstraint> LiverModel::supports() const
+{
+    std::vector<NodeConstraint> out;
+    out.push_back({parameters.region == ModelRegion::body ? "bone_support" : "posterior_support", fixed_nodes, {true, true, true}, Vec3::Zero()});
+    if (!table_nodes.empty()) out.push_back({"table", table_nodes, {false, true, false}, Vec3::Zero()});
+    return out;
+}
+
+Index3 default_model_grid(const LabelVolume& rest_labels, const LabelRoles& roles, ModelRegion region)
+{
+    if (region == ModelRegion::liver) return default_liver_grid(rest_labels, roles);
+    if (std::none_of(rest_labels.labels.begin(), rest_labels.labels.end(), [&](auto l) { return roles.is_liver_tissue(l); }))
+        fail("default model grid: no liver label ({}) in the label map", fmt::join(roles.liver, ","));
+    // The body is the non-background region (every tissue lies inside it).
+    const auto& size = rest_labels.geometry.size;
+    Index3 lo{size[0], size[1], size[2]}, hi{-1, -1, -1};
+    for (std::int64_t k = 0; k < size[2]; ++k)
+        for (std::int64_t j = 0; j < size[1]; ++j)
+            for (std::int64_t i = 0; i < size[0]; ++i) {
+                const auto l = rest_labels.labels[static_cast<std::size_t>(i + size[0] * (j + size[1] * k))];
+                if (l > 0) {
+                    const Index3 at{i, j, k};
+                    for (int a = 0; a < 3; ++a) {
+                        lo[a] = std::min(lo[a], at[a]);
+                        hi[a] = std::max(hi[a], at[a]);
+                    }
+                }
+            }
+    if (hi[0] < 0) fail("default model grid: the label map is empty (only background)");
+    const Index3 cap{54, 40, 26};
+    Index3 grid;
+    for (int a = 0; a < 3; ++a) grid[a] = std::max<std::int64_t>(2, std::min<std::int64_t>(cap[a], hi[a] - lo[a] + 1));
+    return grid;
+}
+
 LiverModel build_liver_model(const LabelVolume& rest_labels, const LabelRoles& roles, const ModelParameters& parameters,
                              const std::string& what)
 {
@@ -207,19 +314,32 @@ LiverModel build_liver_model(const LabelVolume& rest_labels, const LabelRoles& r
     const bool homogeneous = parameters.variant == ModelVariant::homogeneous;
     auto add = [&](const std::set<std::int32_t>& labels, TissueGroup group, const char* name, double young) {
         for (const auto l : labels) {
-            if (!present.count(l)) continue;
-            const double e = homogeneous ? parameters.parenchyma_young_pa : young;
-            model.tissues.tissues.push_back({l, fmt::format("{}_{}", name, l), e, parameters.poisson_ratio, 1000.0});
+            if (!present.count(l) || groups.count(l)) continue;
+            model.tissues.tissues.push_back({l, fmt::format("{}_{}", name, l), young, parameters.poisson_ratio, 1000.0});
             groups[l] = group;
         }
     };
-    add(roles.liver, TissueGroup::parenchyma, "parenchyma", parameters.parenchyma_young_pa);
-    add(roles.lesion, TissueGroup::tumour, "tumour", parameters.tumour_young_pa);
-    add(roles.vessel, TissueGroup::vessel, "vessel", parameters.vessel_young_pa);
+    // Homogeneous: the liver is one material (Han et al.); the gel around it keeps its own.
+    const double parenchyma = parameters.parenchyma_young_pa;
+    add(roles.liver, TissueGroup::parenchyma, "parenchyma", parenchyma);
+    add(roles.lesion, TissueGroup::tumour, "tumour", homogeneous ? parenchyma : parameters.tumour_young_pa);
+    add(roles.vessel, TissueGroup::vessel, "vessel", homogeneous ? parenchyma : parameters.vessel_young_pa);
     if (model.tissues.tissues.empty())
         fail("{}: no liver label ({}) in the label map", what, fmt::join(roles.liver, ","));
+    const bool body = parameters.region == ModelRegion::body;
+    if (body) {
+        // The organs are cast into the gel and tied to it (shared nodes, as the phantom is made),
+        // so body, kidney and bone join the parenchyma's coupling group.
+        const auto gel = body_labels(present, roles);
+        if (gel.empty() || std::none_of(gel.begin(), gel.end(), [&](std::int32_t l) { return present.count(l) > 0; }))
+            fail("{}: region body: no body label in the label map (labels found: {}); name it with the label roles or use --region liver",
+                 what, fmt::join(present, ","));
+        add(gel, TissueGroup::parenchyma, "body", parameters.body_young_pa);
+        add(roles.kidney, TissueGroup::parenchyma, "kidney", parenchyma);
+        add(roles.bone, TissueGroup::parenchyma, "bone", parameters.body_young_pa); // held: its modulus never acts
+    }
     for (const auto l : present)
-        if (l != 0 && !groups.count(l)) model.tissues.ignored_labels.insert(l); // body, bone, kidneys: not the liver
+        if (l != 0 && !groups.count(l)) model.tissues.ignored_labels.insert(l); // liver region: body, bone, kidneys are not meshed
     model.tissues.validate(what);
     MeshingOptions meshing;
     meshing.grid_dims = parameters.grid;
@@ -240,9 +360,15 @@ LiverModel build_liver_model(const LabelVolume& rest_labels, const LabelRoles& r
         model.original_vertex.resize(model.mesh.node_count());
         std::iota(model.original_vertex.begin(), model.original_vertex.end(), 0);
     }
-    for (std::size_t n = 0; n < model.mesh.node_count(); ++n)
-        if (fixed_vertex[static_cast<std::size_t>(model.original_vertex[n])]) model.fixed_nodes.push_back(static_cast<std::int32_t>(n));
-    if (model.fixed_nodes.empty()) fail("{}: the liver has no posterior-facing surface to rest on", what);
+    if (body) {
+        std::set<std::int32_t> bone;
+        for (const auto l : roles.bone)
+            if (present.count(l)) bone.insert(l);
+        model.bone_labels = bone;
+        set_body_supports(model, bone, what);
+    } else {
+        set_liver_supports(model, fixed_vertex, what);
+    }
     model.tled = std::make_unique<TledModel>(model.mesh, model.tissues, TledOptions{});
     return model;
 }
@@ -255,15 +381,14 @@ LiverModel coarsen_liver_model(const LiverModel& fine, const Index3& grid, std::
     model.parameters.variant = ModelVariant::shared_nodes;
     model.parameters.grid = grid;
     model.tissues = fine.tissues;
+    model.bone_labels = fine.bone_labels;
     model.mesh = std::move(coarse.mesh);
     model.fingerprint = mesh_fingerprint(model.mesh);
     model.cell_size_mm = model.mesh.grid->cell_size;
     model.original_vertex.resize(model.mesh.node_count());
     std::iota(model.original_vertex.begin(), model.original_vertex.end(), 0);
-    const std::vector<char> fixed = posterior_support(model.mesh);
-    for (std::size_t n = 0; n < fixed.size(); ++n)
-        if (fixed[n]) model.fixed_nodes.push_back(static_cast<std::int32_t>(n));
-    if (model.fixed_nodes.empty()) fail("coarse model: the liver has no posterior-facing surface to rest on");
+    if (model.parameters.region == ModelRegion::body) set_body_supports(model, model.bone_labels, "coarse model");
+    else set_liver_supports(model, posterior_support(model.mesh), "coarse model");
     model.tled = std::make_unique<TledModel>(model.mesh, model.tissues, TledOptions{});
     if (fine_nodes) *fine_nodes = std::move(coarse.fine_nodes);
     return model;
@@ -310,28 +435,58 @@ CompressionPrediction predict_compression(const LiverModel& model, const Indente
     const double back = 2.0 * model.cell_size_mm.maxCoeff();
     Indenter moving = tool;
     moving.path = {contact - back * d, end};
+    const bool warm = !options.initial_displacement_mm.empty();
+    if (warm) {
+        if (options.initial_displacement_mm.size() != 3 * model.mesh.node_count())
+            fail("{}: the initial displacement has {} values for {} nodes", what, options.initial_displacement_mm.size(), model.mesh.node_count());
+        moving.path = {end}; // the tissue is already where this tool left it
+    }
     Loads loads;
-    loads.constraints.push_back({"posterior_support", model.fixed_nodes, {true, true, true}, Vec3::Zero()});
+    loads.constraints = model.supports();
     loads.indenters.push_back(moving);
-    EquilibriumOptions equilibrium = options.equilibrium;
     const double travel = depth + back;
-    equilibrium.ramp_iterations = std::max<long>(equilibrium.ramp_iterations,
-                                                 std::lround(std::ceil(1.875 * travel / (options.tool_speed_per_cell * model.cell_size_mm.minCoeff()))));
-    StaticSolver solver(*model.tled, {options.method, equilibrium, options.newton});
-    solver.set_coupling(model.coupling.empty() ? nullptr : &model.coupling);
-    solver.set_loads(loads);
     CompressionPrediction out;
     const auto t0 = std::chrono::steady_clock::now();
-    StaticSolveResult summary;
-    try {
-        summary = solver.solve(1.0);
-    } catch (const Error& e) {
-        fail("{}: {}", what, e.what());
+    // A tool ramped too fast through the skin can fold an element before the tissue around it has
+    // caught up (the static equilibrium does not depend on the ramp: frictionless contact and a
+    // hyperelastic law). Relaxation then retries with a ramp three times slower (a warm start that
+    // folds one restarts from rest first), four tries in all, and says so; a Newton solve or the
+    // last try's inversion is the error.
+    double speed = options.tool_speed_per_cell;
+    bool warm_now = warm;
+    for (int attempt = 0;; ++attempt) {
+        EquilibriumOptions equilibrium = options.equilibrium;
+        loads.indenters = {moving};
+        if (!warm_now) loads.indenters.front().path = {contact - back * d, end};
+        equilibrium.ramp_iterations = warm_now ? 1
+                                               : std::max<long>(equilibrium.ramp_iterations,
+                                                                std::lround(std::ceil(1.875 * travel / (speed * model.cell_size_mm.minCoeff()))));
+        StaticSolver solver(*model.tled, {options.method, equilibrium, options.newton});
+        solver.set_coupling(model.coupling.empty() ? nullptr : &model.coupling);
+        solver.set_loads(loads);
+        if (warm_now) solver.set_displacement(options.initial_displacement_mm);
+        StaticSolveResult summary;
+        try {
+            summary = solver.solve(1.0);
+        } catch (const Error& e) {
+            const bool inverted = std::string(e.what()).find("inverted") != std::string::npos;
+            if (!inverted || options.method != StaticMethod::relaxation || attempt == 3) fail("{}: {}", what, e.what());
+            if (warm_now) {
+                warm_now = false; // the warm start folded an element: start from rest
+                continue;
+            }
+            logger()->warn("{}: an element folded under the tool at a ramp of {:.4g} cells per iteration; retrying at {:.4g}", what, speed,
+                           speed / 3.0);
+            speed /= 3.0;
+            ++out.slower_ramps;
+            continue;
+        }
+        if (!summary.converged) fail("{}: {}", what, summary.message);
+        out.iterations = summary.iterations;
+        out.displacement_mm = solver.displacement_mm();
+        break;
     }
-    if (!summary.converged) fail("{}: {}", what, summary.message);
     out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    out.iterations = summary.iterations;
-    out.displacement_mm = solver.displacement_mm();
     for (std::size_t n = 0; n < model.mesh.node_count(); ++n)
         out.max_displacement_mm = std::max(out.max_displacement_mm, Vec3(out.displacement_mm[3 * n], out.displacement_mm[3 * n + 1],
                                                                          out.displacement_mm[3 * n + 2]).norm());
@@ -358,7 +513,7 @@ CompressionTracker::Update CompressionTracker::move_to(const Vec3& position, con
     Indenter tool = m_tool;
     tool.path = {m_position, position};
     Loads loads;
-    loads.constraints.push_back({"posterior_support", m_model.fixed_nodes, {true, true, true}, Vec3::Zero()});
+    loads.constraints = m_model.supports();
     loads.indenters.push_back(tool);
     m_solver.set_loads(loads);
     m_solver.reset_load_factor();
@@ -370,20 +525,24 @@ CompressionTracker::Update CompressionTracker::move_to(const Vec3& position, con
         for (std::size_t k = 0; k < guess.size(); ++k) guess[k] = current[k] + ratio * (current[k] - m_previous[k]);
         m_solver.set_displacement(guess);
     }
-    const long ramp = std::max<long>(1, std::lround(std::ceil(1.875 * travel / (m_options.tool_speed_per_cell * m_model.cell_size_mm.minCoeff()))));
     const auto t0 = std::chrono::steady_clock::now();
     StaticSolveResult s;
-    try {
-        s = m_solver.solve(1.0, ramp);
-    } catch (const Error& e) {
-        if (m_previous.empty()) fail("{}: {}", what, e.what());
-        // The extrapolated guess folded an element: start from the last equilibrium instead.
-        m_solver.set_displacement(current);
-        m_solver.reset_load_factor();
+    // An extrapolated guess or a fast ramp can fold an element under the tool: start again from
+    // the last equilibrium, then with ramps three times slower (twice at most), as
+    // predict_compression does.
+    double speed = m_options.tool_speed_per_cell;
+    for (int attempt = 0;; ++attempt) {
+        const long ramp = std::max<long>(1, std::lround(std::ceil(1.875 * travel / (speed * m_model.cell_size_mm.minCoeff()))));
         try {
             s = m_solver.solve(1.0, ramp);
-        } catch (const Error& again) {
-            fail("{}: {}", what, again.what());
+            break;
+        } catch (const Error& e) {
+            const bool inverted = std::string(e.what()).find("inverted") != std::string::npos;
+            if (!inverted || m_options.method != StaticMethod::relaxation || attempt == 3) fail("{}: {}", what, e.what());
+            if (attempt > 0 || m_previous.empty()) speed /= 3.0;
+            logger()->debug("{}: an element folded; retrying from the last equilibrium at a ramp of {:.4g} cells per iteration", what, speed);
+            m_solver.set_displacement(current);
+            m_solver.reset_load_factor();
         }
     }
     if (!s.converged) fail("{}: {}", what, s.message);

@@ -27,8 +27,12 @@ std::vector<CompressionCase> compression_cases(const PhantomDataset& dataset, co
 struct EstimationOptions {
     bool fit_coupling = true;                ///< coupled variant: k_{c,s-t}, k_{c,s-v}
     bool fit_moduli = false;                 ///< tumour and vessel E (parenchyma's fixes the scale)
+    /// Body region: the gel's E (the gel-to-parenchyma ratio: the tool presses the gel, which
+    /// carries the load to the liver; the parenchyma's E fixes the scale).
+    bool fit_body_modulus = true;
     double k_min_n_per_m = 1.0, k_max_n_per_m = 1e5;
     double modulus_min_pa = 1e4, modulus_max_pa = 1e8;
+    double body_modulus_min_pa = 2e3, body_modulus_max_pa = 2e6;
     std::string algorithm = "bobyqa";        ///< bobyqa | neldermead
     int max_evaluations = 30;
     double x_tolerance_decades = 0.02;       ///< stop when a step changes log10(parameter) by less
@@ -53,12 +57,20 @@ struct EstimationResult {
     double seconds = 0.0;
     std::string optimiser;                   ///< e.g. "NLopt LN_BOBYQA"
     std::string stop_reason;
+    std::vector<std::string> free_parameters; ///< names of the fitted parameters, in optimiser order
+    /// Fitted parameters within 0.05 decades of a bound: the optimum may lie beyond it.
+    std::vector<std::string> at_bound;
+    /// Evaluations whose parameters folded an element (objective 1000 mm, kept in `history`).
+    int infeasible_evaluations = 0;
 };
 
-/// Solves every case with `parameters` (in parallel over cases); TRE per case.
+/// Solves every case with `parameters` (in parallel over cases); TRE per case. `warm` (optional,
+/// one entry per case): each case starts from its entry when it is not empty (an equilibrium of
+/// the same mesh, e.g. under the previous parameters) and leaves its new equilibrium there.
 std::vector<std::pair<std::string, TreReport>> evaluate_cases(const LabelVolume& rest_labels, const LabelRoles& roles,
                                                               const ModelParameters& parameters, const LandmarkSet& rest_landmarks,
-                                                              const std::vector<CompressionCase>& cases, const PredictionOptions& options);
+                                                              const std::vector<CompressionCase>& cases, const PredictionOptions& options,
+                                                              std::vector<std::vector<double>>* warm = nullptr);
 
 /// Fits the free parameters of `initial` (none for homogeneous / shared-nodes without
 /// fit_moduli: then the model is just evaluated). `progress(fraction, message)` after each

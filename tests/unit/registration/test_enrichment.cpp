@@ -32,6 +32,7 @@ struct TwoLevels {
         const PhantomDataset d = read_phantom_dataset(dir / "ds");
         const LabelVolume labels = read_label_volume(d.path(d.state("rest").files.at("labels")));
         ModelParameters p;
+        p.region = ModelRegion::liver;
         p.grid = {36, 27, 12};
         fine = build_liver_model(labels, d.roles, p, "small rest");
         coarse = coarsen_liver_model(fine, {12, 9, 6}, &embedding);
@@ -270,7 +271,7 @@ TEST(EnrichmentMatch, ExactConditionsRangeAndModelChecks)
     // The database must fit the model: same meshes and parameters.
     EXPECT_NO_THROW(check_database_fits(db, t.fine, t.coarse, "db"));
     LiverModel other = build_liver_model(read_label_volume(levels().dir / "ds" / "rest" / "labels.nii.gz"), phantom_label_roles(),
-                                         [] { ModelParameters p; p.grid = {36, 27, 12}; p.coupling = {900, 500}; return p; }(), "other");
+                                         [] { ModelParameters p; p.region = ModelRegion::liver; p.grid = {36, 27, 12}; p.coupling = {900, 500}; return p; }(), "other");
     EXPECT_NE(test::error_message([&] { check_database_fits(db, other, t.coarse, "db"); }).find("other model parameters"), std::string::npos);
     EXPECT_NE(test::error_message([&] { check_database_fits(db, t.coarse, t.coarse, "db"); }).find("another fine mesh"), std::string::npos);
 }
