@@ -429,6 +429,12 @@ void add_subcommand_demo(CLI::App& app)
                         {"methods", table},
                         {"fitted", parameters_json(fit.fitted)},
                         {"fit_at_bound", fit.at_bound},
+                        {"fit_identifiability", [&] {
+                             json j = json::object();
+                             for (const auto& s : fit.sensitivity)
+                                 j[s.parameter] = {{"objective_change_mm_per_decade", s.mm_per_decade}, {"identifiable", s.identifiable}};
+                             return j;
+                         }()},
                         {"train_tre", json::parse(tre_stats_json(fit.train_pooled))},
                         {"validation_tre", json::parse(tre_stats_json(fit.validation_pooled))},
                         {"validation_landmarks_at_rest", json::parse(tre_stats_json(fit.validation_at_rest))},

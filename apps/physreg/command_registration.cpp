@@ -93,6 +93,11 @@ void add_subcommand_estimate(CLI::App& app)
         summary["fitted"] = parameters_json(r.fitted);
         summary["free_parameters"] = r.free_parameters;
         summary["at_bound"] = r.at_bound; // fitted parameters that ended at a bound (the optimum may lie beyond)
+        summary["infeasible_evaluations"] = r.infeasible_evaluations;
+        for (const auto& s : r.sensitivity)
+            summary["identifiability"][s.parameter] = {{"objective_change_mm_per_decade", s.mm_per_decade}, {"one_parameter_steps", s.evaluations},
+                                                       {"identifiable", s.identifiable},
+                                                       {"threshold_mm_per_decade", EstimationResult::identifiable_mm_per_decade}};
         summary["mesh_fingerprint"] = r.fingerprint;
         summary["train"] = json::parse(tre_stats_json(r.train_pooled));
         if (!r.validation.empty()) summary["validation"] = json::parse(tre_stats_json(r.validation_pooled));
@@ -118,6 +123,9 @@ void add_subcommand_estimate(CLI::App& app)
                                  r.fitted.body_young_pa, to_string(r.fitted.region));
         if (!r.at_bound.empty())
             std::cerr << fmt::format("  WARNING: {} ended at a bound; the optimum may lie beyond it\n", fmt::join(r.at_bound, ", "));
+        for (const auto& s : r.sensitivity)
+            std::cerr << fmt::format("  {:<16} {:.4f} mm per decade over {} one-parameter steps: {}\n", s.parameter, s.mm_per_decade, s.evaluations,
+                                     s.evaluations == 0 ? "not measured" : s.identifiable ? "identifiable" : "NOT identifiable from these landmarks");
         for (const auto& [name, rep] : r.train) std::cerr << fmt::format("  train {:<6} {}\n", name, tre_line(rep));
         std::cerr << fmt::format("  TRAIN        {}\n", tre_line(r.train_pooled));
         for (const auto& [name, rep] : r.validation) std::cerr << fmt::format("  validate {:<3} {}\n", name, tre_line(rep));

@@ -859,12 +859,20 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
     std::vector<SolvedState> solved_compressions(compressions.size());
     std::vector<std::exception_ptr> failures(compressions.size());
     const int solvers = std::max(1, std::min<int>(omp_get_max_threads(), static_cast<int>(compressions.size())));
+    std::size_t finished = 0;
 #pragma omp parallel for schedule(dynamic, 1) num_threads(solvers)
     for (long c = 0; c < static_cast<long>(compressions.size()); ++c) {
         try {
             solved_compressions[static_cast<std::size_t>(c)] = solve_compression(gt, spec, p, compressions[static_cast<std::size_t>(c)]);
         } catch (...) {
             failures[static_cast<std::size_t>(c)] = std::current_exception();
+        }
+        // The bar moves as each compression is solved (it stood still for minutes before).
+#pragma omp critical(phantom_progress)
+        {
+            ++finished;
+            report(prepared + 0.01 + (solved_all - prepared - 0.01) * double(finished) / double(compressions.size()),
+                   fmt::format("{} of {} compressions solved (last: {})", finished, compressions.size(), compressions[static_cast<std::size_t>(c)].name));
         }
     }
     for (const auto& failure : failures)

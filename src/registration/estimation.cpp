@@ -208,6 +208,31 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
                                std::pow(10.0, x[i]), free[i].lo, free[i].hi);
             }
     }
+    // One-parameter steps from the start: a profile of each parameter around it.
+    if (!result.history.empty() && !free.empty()) {
+        auto log_of = [&](const ModelParameters& p) {
+            std::vector<double> v;
+            for (const auto& f : free) v.push_back(std::log10(*f.slot(const_cast<ModelParameters&>(p))));
+            return v;
+        };
+        const auto start = log_of(result.history.front().parameters);
+        const double start_value = result.history.front().objective_mm;
+        for (std::size_t i = 0; i < free.size(); ++i) {
+            EstimationResult::Sensitivity s{free[i].name, 0.0, 0, false};
+            for (const auto& step : result.history) {
+                if (step.objective_mm >= infeasible_mm) continue;
+                const auto x = log_of(step.parameters);
+                bool alone = std::abs(x[i] - start[i]) > 1e-6;
+                for (std::size_t j = 0; j < free.size() && alone; ++j)
+                    if (j != i && std::abs(x[j] - start[j]) > 1e-9) alone = false;
+                if (!alone) continue;
+                s.mm_per_decade = std::max(s.mm_per_decade, std::abs(step.objective_mm - start_value) / std::abs(x[i] - start[i]));
+                ++s.evaluations;
+            }
+            s.identifiable = s.evaluations > 0 && s.mm_per_decade >= EstimationResult::identifiable_mm_per_decade;
+            result.sensitivity.push_back(s);
+        }
+    }
     // The training reports of the best evaluation (NLopt returns the best point it evaluated).
     result.train = best_value == result.objective_mm ? best_reports
                                                      : evaluate_cases(rest_labels, roles, result.fitted, rest_landmarks, train, options.prediction);

@@ -117,7 +117,7 @@ struct DatasetReport {
 };
 
 /// Builds the dataset into `directory` (staged: it appears only when complete; an existing
-/// non-empty folder is refused unless `replace`). `progress(fraction, message)` along the way.
+/// non-empty folder is refused unless `replace`). `progress(fraction, message)` along the way: one call at a time, but possibly from a worker thread (as each parallel compression solve ends).
 DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const std::filesystem::path& directory, bool replace,
                                        const std::function<void(double, const std::string&)>& progress);
 

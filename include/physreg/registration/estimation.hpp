@@ -62,6 +62,17 @@ struct EstimationResult {
     std::vector<std::string> at_bound;
     /// Evaluations whose parameters folded an element (objective 1000 mm, kept in `history`).
     int infeasible_evaluations = 0;
+    /// Identifiability, from the evaluations that moved one parameter alone away from the start
+    /// (BOBYQA's first steps): the largest |Δ objective| per decade of that parameter. Below
+    /// `identifiable_mm_per_decade` the landmarks cannot tell its values apart.
+    struct Sensitivity {
+        std::string parameter;
+        double mm_per_decade = 0.0;
+        int evaluations = 0;   ///< feasible one-parameter steps it rests on (0: not measured)
+        bool identifiable = false;
+    };
+    std::vector<Sensitivity> sensitivity;
+    static constexpr double identifiable_mm_per_decade = 0.02;
 };
 
 /// Solves every case with `parameters` (in parallel over cases); TRE per case. `warm` (optional,

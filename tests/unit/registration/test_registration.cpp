@@ -202,6 +202,21 @@ TEST(Estimation, FitsCouplingWithinBoundsAndReportsTrainAndValidation)
     for (const auto& step : r.history) EXPECT_GE(step.objective_mm, r.objective_mm - 1e-12);
     EXPECT_EQ(r.train.size(), 2u);
     EXPECT_EQ(r.validation.size(), 1u);
+    // Identifiability from BOBYQA's one-parameter steps: one entry per fitted parameter, each
+    // resting on at least one step (its first steps move one parameter at a time), its slope the
+    // objective change over that step.
+    ASSERT_EQ(r.sensitivity.size(), 2u);
+    EXPECT_EQ(r.free_parameters, (std::vector<std::string>{"k_c_s_t_n_per_m", "k_c_s_v_n_per_m"}));
+    for (const auto& s : r.sensitivity) {
+        EXPECT_GE(s.evaluations, 1) << s.parameter;
+        EXPECT_GE(s.mm_per_decade, 0.0);
+        EXPECT_EQ(s.identifiable, s.mm_per_decade >= EstimationResult::identifiable_mm_per_decade);
+    }
+    const double slope = std::abs(r.history[1].objective_mm - r.history[0].objective_mm) /
+                         std::abs(std::log10(r.history[1].parameters.coupling.parenchyma_tumour_n_per_m /
+                                             r.history[0].parameters.coupling.parenchyma_tumour_n_per_m));
+    EXPECT_GE(r.sensitivity[0].mm_per_decade, slope * (1 - 1e-9));
+    EXPECT_EQ(r.infeasible_evaluations, 0);
     EXPECT_EQ(r.validation_pooled.all.count, d.rest.size());
     // Bad input: a training compression without landmarks, no training set, an impossible bound.
     auto empty = train;
