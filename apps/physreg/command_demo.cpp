@@ -190,7 +190,7 @@ void add_subcommand_demo(CLI::App& app)
         // The body model (gel with the organs inside, bone held, base on the table): 5 mm cells on the
         // CIRS body, 10 mm coarse; about half that resolution for --quick.
         const Index3 grid = o->quick ? Index3{27, 20, 13} : Index3{54, 40, 26};
-        const Index3 coarse_grid = o->quick ? Index3{14, 10, 7} : Index3{27, 20, 13};
+        const Index3 coarse_grid = o->quick ? Index3{20, 15, 10} : Index3{27, 20, 13};
         // Tool travel on the skin from first contact, as in the phantom's compressions (up to 25 mm).
         const std::vector<double> depths = o->quick ? std::vector<double>{4, 8, 12, 15} : std::vector<double>{5, 10, 15, 20, 25};
         const int evaluations = o->evaluations > 0 ? o->evaluations : (o->quick ? 4 : 8);
@@ -258,6 +258,8 @@ void add_subcommand_demo(CLI::App& app)
         const LiverModel coarse = coarsen_liver_model(fine, coarse_grid, &embedding);
         EnrichmentPlan plan;
         // Held-out evaluation: only the training compressions' tool positions go into the database.
+        // A grid over the skin (`enrich build --positions-grid`) was measured here and made
+        // coarse-to-fine worse (docs/enrichment.md): the detail of a position 10 mm away hurts.
         for (const auto& c : train_cases)
             plan.positions.push_back({c.name, c.tool.path.front()}), plan.direction = (c.tool.path.back() - c.tool.path.front()).normalized();
         plan.depths_mm = depths;

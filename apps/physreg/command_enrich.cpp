@@ -90,7 +90,7 @@ void add_subcommand_enrich(CLI::App& app)
     group->require_subcommand(1);
 
     struct BuildOptions : CommonOptions {
-        std::string dataset, parameters, output, positions, depths, coarse_grid = "24x18x18";
+        std::string dataset, parameters, output, positions, positions_grid, depths, coarse_grid = "24x18x18";
         ModelOptions model;
         int depth_count = 0, orientations = 1;
         double max_depth = 0.0, tilt = 15.0;
@@ -104,6 +104,8 @@ void add_subcommand_enrich(CLI::App& app)
     add_model_options(build, b->model);
     build->add_option("--coarse-grid", b->coarse_grid, "Coarse model cells over the liver (default 24x18x18, paper 000)");
     build->add_option("--positions", b->positions, "Compressions of the dataset whose entry points are used (default: all)");
+    build->add_option("--positions-grid", b->positions_grid, "Instead: CxR tool positions on a grid over the skin above the liver (central "
+                                                             "70 %), each where the dataset's tool (a sphere) first touches the body");
     build->add_option("--depths", b->depths, "Tool depths beyond first contact, mm, increasing (default: 2 mm steps to the deepest compression)");
     build->add_option("--depth-count", b->depth_count, "Instead of --depths: this many depths evenly up to --max-depth");
     build->add_option("--max-depth", b->max_depth, "With --depth-count: the deepest, mm");
@@ -140,6 +142,15 @@ void add_subcommand_enrich(CLI::App& app)
             deepest = std::max(deepest, state.depth_mm);
         }
         const Indenter shape = *loaded.dataset.state(names.front()).tool;
+        if (!b->positions_grid.empty()) {
+            if (!b->positions.empty()) fail("--positions and --positions-grid exclude each other");
+            const auto x = b->positions_grid.find('x');
+            const auto columns = x == std::string::npos ? std::nullopt : parse_number(b->positions_grid.substr(0, x));
+            const auto rows = x == std::string::npos ? std::nullopt : parse_number(b->positions_grid.substr(x + 1));
+            if (!columns || !rows) fail("--positions-grid: '{}' is not CxR (e.g. 3x2)", b->positions_grid);
+            plan.positions = skin_grid_positions(loaded.labels, loaded.dataset.roles, shape, plan.direction,
+                                                 to_integer<int>(*columns, "--positions-grid", "columns"), to_integer<int>(*rows, "--positions-grid", "rows"));
+        }
         if (!b->depths.empty()) {
             plan.depths_mm = parse_number_list(b->depths, "--depths");
         } else if (b->depth_count > 0) {

@@ -11,6 +11,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <fstream>
 #include <map>
 #include <mutex>
@@ -57,6 +58,60 @@ Indenter condition_tool(const Indenter& shape, const EnrichmentCondition& c, dou
     Indenter tool = shape;
     tool.path = {c.contact_mm - back_mm * c.direction, c.contact_mm + c.depth_mm * c.direction};
     return tool;
+}
+
+std::vector<EnrichmentPlan::Position> skin_grid_positions(const LabelVolume& rest_labels, const LabelRoles& roles, const Indenter& tool,
+                                                          const Vec3& direction, int columns, int rows)
+{
+    if (tool.shape != IndenterShape::sphere || !(tool.radius_mm > 0)) fail("skin grid positions: the tool must be a sphere (radius > 0 mm)");
+    if (columns < 1 || rows < 1 || columns > 50 || rows > 50) fail("skin grid positions: {} x {} positions (need 1 … 50 each way)", columns, rows);
+    if (!(direction.norm() > 0) || !direction.allFinite()) fail("skin grid positions: the pressing direction is zero or not finite");
+    const Vec3 d = direction.normalized();
+    // Two axes across the pressing direction.
+    const Vec3 helper = std::abs(d.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitZ();
+    const Vec3 e1 = (helper - helper.dot(d) * d).normalized(), e2 = d.cross(e1);
+    const auto& g = rest_labels.geometry;
+    const auto& size = g.size;
+    auto at = [&](std::int64_t i, std::int64_t j, std::int64_t k) {
+        return rest_labels.labels[static_cast<std::size_t>(i + size[0] * (j + size[1] * k))];
+    };
+    // The liver's extent across the direction; the body's boundary voxels (a background face neighbour).
+    Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    std::vector<Vec3> skin;
+    for (std::int64_t k = 0; k < size[2]; ++k)
+        for (std::int64_t j = 0; j < size[1]; ++j)
+            for (std::int64_t i = 0; i < size[0]; ++i) {
+                const auto l = at(i, j, k);
+                if (l == 0) continue;
+                const Vec3 x = g.index_to_physical(Vec3(double(i), double(j), double(k)));
+                if (roles.is_liver_tissue(l)) {
+                    const Vec3 c(x.dot(e1), x.dot(e2), x.dot(d));
+                    lo = lo.cwiseMin(c), hi = hi.cwiseMax(c);
+                }
+                const bool boundary = i == 0 || j == 0 || k == 0 || i + 1 == size[0] || j + 1 == size[1] || k + 1 == size[2] || at(i - 1, j, k) == 0 ||
+                                      at(i + 1, j, k) == 0 || at(i, j - 1, k) == 0 || at(i, j + 1, k) == 0 || at(i, j, k - 1) == 0 || at(i, j, k + 1) == 0;
+                if (boundary) skin.push_back(x);
+            }
+    if (!(hi.x() >= lo.x())) fail("skin grid positions: no liver label ({}) in the label map", fmt::join(roles.liver, ","));
+    const double r = tool.radius_mm;
+    std::vector<EnrichmentPlan::Position> out;
+    for (int c = 0; c < columns; ++c)
+        for (int w = 0; w < rows; ++w) {
+            const double fa = columns == 1 ? 0.5 : 0.15 + 0.7 * double(c) / double(columns - 1);
+            const double fb = rows == 1 ? 0.5 : 0.15 + 0.7 * double(w) / double(rows - 1);
+            const Vec3 p = (lo.x() + fa * (hi.x() - lo.x())) * e1 + (lo.y() + fb * (hi.y() - lo.y())) * e2; // on the line, t = 0
+            // First touch of the sphere moving along d: the smallest centre offset t at which a
+            // skin point lies on the sphere, t = s − √(r² − ρ²) over skin points within r of the line.
+            double first = std::numeric_limits<double>::infinity();
+            for (const auto& x : skin) {
+                const Vec3 v = x - p;
+                const double s = v.dot(d), rho2 = (v - s * d).squaredNorm();
+                if (rho2 <= r * r) first = std::min(first, s - std::sqrt(r * r - rho2));
+            }
+            if (!std::isfinite(first)) fail("skin grid positions: the line through ({:.1f}, {:.1f}, {:.1f}) mm misses the body", p.x(), p.y(), p.z());
+            out.push_back({fmt::format("G{}{}", c + 1, w + 1), p + first * d});
+        }
+    return out;
 }
 
 std::string enrichment_model_json(const LiverModel& fine, const LiverModel& coarse)

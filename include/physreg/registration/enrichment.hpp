@@ -74,6 +74,15 @@ struct EnrichmentPlan {
     std::vector<EnrichmentCondition> conditions() const;
 };
 
+/// Tool positions over the skin that a session's tool can reach, independent of any recorded
+/// compression: `columns` × `rows` entry lines along `direction`, evenly over the central 70 % of
+/// the liver's extent across that direction (the tool presses over the liver), each at the
+/// position where the sphere `tool` first touches the body (non-background voxels) of
+/// `rest_labels`. Names G<column><row>. Throws Error for a tool that is not a sphere, a grid
+/// under 1 × 1, a label map without liver, or a line that misses the body.
+std::vector<EnrichmentPlan::Position> skin_grid_positions(const LabelVolume& rest_labels, const LabelRoles& roles, const Indenter& tool,
+                                                          const Vec3& direction, int columns, int rows);
+
 /// The tool path of a condition: from two coarse cells back along the direction to the depth.
 Indenter condition_tool(const Indenter& shape, const EnrichmentCondition& condition, double back_mm);
 

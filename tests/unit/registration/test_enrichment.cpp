@@ -169,6 +169,42 @@ TEST(EnrichmentDatabase, TruncatedOrBitFlippedFilesAreRejected)
 namespace physreg {
 namespace {
 
+TEST(EnrichmentPlan, SkinGridPositionsTouchTheBodyAboveTheLiver)
+{
+    // A 40 × 30 × 20-voxel body (1 mm voxels, origin 0) with a flat anterior skin at y = 5 and a liver at
+    // x 10…29, z 5…14; a 4 mm ball pressing along +y first touches the skin with its centre at y = 5 − 4
+    // (voxel centres, where the skin voxels sit).
+    const LabelRoles roles = phantom_label_roles();
+    const auto body = static_cast<std::uint16_t>(*roles.body.begin()), liver = static_cast<std::uint16_t>(*roles.liver.begin());
+    const LabelVolume volume = test::make_volume({40, 30, 20}, [&](int i, int j, int k) -> std::uint16_t {
+        if (j < 5) return 0;
+        return i >= 10 && i < 30 && j >= 12 && j < 20 && k >= 5 && k < 15 ? liver : body;
+    });
+    Indenter ball;
+    ball.shape = IndenterShape::sphere;
+    ball.radius_mm = 4.0;
+    const auto positions = skin_grid_positions(volume, roles, ball, Vec3::UnitY(), 3, 2);
+    ASSERT_EQ(positions.size(), 6u);
+    EXPECT_EQ(positions.front().name, "G11");
+    EXPECT_EQ(positions.back().name, "G32");
+    for (const auto& p : positions) {
+        // The skin is sampled at voxel centres: a line between them meets the ball's pole up to
+        // r − √(r² − 0.5) ≈ 0.06 mm later.
+        EXPECT_GE(p.contact_mm.y(), 1.0 - 1e-9) << p.name;
+        EXPECT_LE(p.contact_mm.y(), 1.07) << p.name;
+        EXPECT_GE(p.contact_mm.x(), 10.0 - 1e-9);
+        EXPECT_LE(p.contact_mm.x(), 29.0 + 1e-9);
+        EXPECT_GE(p.contact_mm.z(), 5.0 - 1e-9);
+        EXPECT_LE(p.contact_mm.z(), 14.0 + 1e-9);
+    }
+    // Evenly over the central 70 % of the liver's 19 mm (voxel centres 10…29) across x.
+    EXPECT_NEAR(positions[2].contact_mm.x() - positions[0].contact_mm.x(), 0.35 * 19.0, 1e-9);
+    Indenter box = ball;
+    box.shape = IndenterShape::box;
+    EXPECT_NE(test::error_message([&] { skin_grid_positions(volume, roles, box, Vec3::UnitY(), 3, 2); }).find("must be a sphere"), std::string::npos);
+    EXPECT_NE(test::error_message([&] { skin_grid_positions(volume, roles, ball, Vec3::UnitY(), 0, 2); }).find("0 x 2"), std::string::npos);
+}
+
 TEST(EnrichmentPlan, ConditionsAndOrientations)
 {
     EnrichmentPlan plan;
