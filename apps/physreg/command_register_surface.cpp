@@ -252,7 +252,7 @@ void add_subcommand_register_surface(CLI::App& app)
     sub->add_option("--region-seeds", o->region_seeds, "Points picked on the surface (CSV/FCSV/.mrk.json) named UN… or AM…: regions grown "
                                                      "along the surface from them");
     sub->add_option("--region-radius", o->region_radius, "--region-seeds: geodesic radius of each region, mm (default 15)");
-    sub->add_option("--cloud", o->cloud, "Intra-operative point cloud (.ply with optional normals and 'label', or .csv x,y,z,label), mm, LPS");
+    sub->add_option("--cloud", o->cloud, "Intra-operative point cloud (.ply with optional normals and 'label', or .csv x,y,z[,label] with or without a header), mm, LPS");
     sub->add_option("--landmarks", o->landmarks, "Targets at rest (CSV/FCSV/.mrk.json) to map through the registration");
     sub->add_option("--landmarks-truth", o->landmarks_truth, "Their true deformed positions (same names): TRE in the summary");
     sub->add_option("--truth-surface", o->truth_surface, "The true deformed liver surface (STL/PLY/OBJ): Hausdorff distance in the summary");

@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <cstring>
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <functional>
@@ -175,36 +176,57 @@ void write_point_cloud_csv(const std::filesystem::path& path, const LabelledPoin
 
 LabelledPointCloud read_point_cloud_csv(const std::filesystem::path& path)
 {
-    require_existing_file(path, "point cloud '" + path.string() + "'");
+    const std::string what = "point cloud '" + path.string() + "'";
+    require_existing_file(path, what);
     std::ifstream in(path);
-    if (!in) fail("point cloud '{}': cannot open file", path.string());
+    if (!in) fail("{}: cannot open file", what);
     LabelledPointCloud cloud;
     std::string line;
     int line_number = 0;
-    bool header = false;
+    bool first = true;
+    std::size_t columns = 0; // 3: x,y,z (every point a plain surface point, label 0); 4: x,y,z,label
+    auto split = [](const std::string& text) {
+        std::vector<std::string> items;
+        std::stringstream fields(text);
+        std::string item;
+        while (std::getline(fields, item, ',')) {
+            const auto b = item.find_first_not_of(" \t\r"), e = item.find_last_not_of(" \t\r");
+            items.push_back(b == std::string::npos ? "" : item.substr(b, e - b + 1));
+        }
+        return items;
+    };
     while (std::getline(in, line)) {
         ++line_number;
-        if (line.empty() || line[0] == '#') continue;
-        if (!header) {
-            if (line != "x,y,z,label") fail("point cloud '{}': line {}: expected the header 'x,y,z,label'", path.string(), line_number);
-            header = true;
-            continue;
+        if (line.empty() || line[0] == '#' || line.find_first_not_of(" \t\r") == std::string::npos) continue;
+        auto items = split(line);
+        if (first) {
+            first = false;
+            // A header as users write it (x,y,z or x,y,z,label, any case), or none: numbers from the start.
+            std::string lower = line;
+            for (auto& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+            const auto names = split(lower);
+            if (names == std::vector<std::string>{"x", "y", "z"} || names == std::vector<std::string>{"x", "y", "z", "label"}) {
+                columns = names.size();
+                continue;
+            }
+            if (!parse_number(items.front()))
+                fail("{}: line {}: the header must name the columns x,y,z or x,y,z,label (got '{}')", what, line_number, line);
+            columns = items.size();
+            if (columns != 3 && columns != 4) fail("{}: line {}: {} values; expected x,y,z or x,y,z,label", what, line_number, columns);
         }
-        std::stringstream fields(line);
-        std::string item;
         std::vector<double> values;
-        while (std::getline(fields, item, ',')) {
+        for (const auto& item : items) {
             const auto value = parse_number(item);
-            if (!value) fail("point cloud '{}': line {}: '{}' is not a number", path.string(), line_number, item);
+            if (!value) fail("{}: line {}: '{}' is not a number", what, line_number, item);
             values.push_back(*value);
         }
-        if (values.size() != 4 || !std::isfinite(values[0]) || !std::isfinite(values[1]) || !std::isfinite(values[2]))
-            fail("point cloud '{}': line {}: expected 4 finite values x,y,z,label", path.string(), line_number);
+        if (values.size() != columns || !std::isfinite(values[0]) || !std::isfinite(values[1]) || !std::isfinite(values[2]))
+            fail("{}: line {}: expected {} finite values ({})", what, line_number, columns, columns == 3 ? "x,y,z" : "x,y,z,label");
         cloud.points.emplace_back(values[0], values[1], values[2]);
         cloud.normals.push_back(Vec3::Zero());
-        cloud.labels.push_back(static_cast<std::int32_t>(values[3]));
+        cloud.labels.push_back(columns == 4 ? to_integer<std::int32_t>(values[3], what, "a point label") : 0);
     }
-    if (!header) fail("point cloud '{}': no header line 'x,y,z,label' (empty or truncated file)", path.string());
+    if (cloud.points.empty()) fail("{}: no points (empty or truncated file)", what);
     return cloud;
 }
 

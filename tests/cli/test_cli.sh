@@ -230,9 +230,17 @@ printf 'x,y,z,label\n1,2,nan,0\n' > "$work/nan_cloud.csv"
 expect_error "register-surface: NaN in the cloud" "expected 4 finite values" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$work/nan_cloud.csv" -o "$work/rs_bad4"
 awk -F, '/^#/ || /^x,/ {print; next} {printf "%f,%f,%f,0\n", $1+500, $2, $3}' "$cloud" > "$work/far_cloud.csv"
 expect_error "register-surface: cloud far from the model" "farther than 40 mm" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$work/far_cloud.csv" -o "$work/rs_bad5"
+# Clouds as users have them: a header x,y,z without labels, or no header at all (plain surface points).
+awk -F, '/^#/ {next} /^x,/ {print "X, Y, Z"; next} {printf "%s,%s,%s\n", $1, $2, $3}' "$cloud" > "$work/xyz_cloud.csv"
+expect_ok "register-surface: cloud with header x,y,z" "$physreg" --no-report $rs --model "$work/rs/mesh.vtu" --cloud "$work/xyz_cloud.csv" -o "$work/rs_xyz"
+expect_file "$work/rs_xyz/summary.json"
+tail -n +2 "$work/xyz_cloud.csv" > "$work/bare_cloud.csv"
+expect_ok "register-surface: cloud without a header" "$physreg" --no-report $rs --model "$work/rs/mesh.vtu" --cloud "$work/bare_cloud.csv" -o "$work/rs_bare"
+printf 'x,y,z,label\n1,2,3,1e30\n' > "$work/huge_label_cloud.csv"
+expect_error "register-surface: label beyond int" "a point label" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$work/huge_label_cloud.csv" -o "$work/rs_bad8"
 expect_error "register-surface: unknown method" "--method 'elastic'" "$physreg" $rs --dataset "$ph" --visible 50 --method elastic -o "$work/rs_bad6"
 expect_error "register-surface: two model sources" "exactly one of --dataset, --labels, --surface and --model" "$physreg" $rs --dataset "$ph" --model "$work/rs/mesh.vtu" -o "$work/rs_bad7"
-for d in rs_bad3 rs_bad4 rs_bad5 rs_bad6 rs_bad7; do expect_no_file "$work/$d"; done
+for d in rs_bad3 rs_bad4 rs_bad5 rs_bad6 rs_bad7 rs_bad8; do expect_no_file "$work/$d"; done
 # A closed surface in, regions grown from two picked points, the heterogeneous model (capsule and
 # the phantom's vessel centrelines).
 awk -F, '/^#/ || /^name/ {print; next} /surface/ && n < 2 {n++; sub(/^[^,]*/, n == 1 ? "UN_1" : "AM_1"); print}' "$ph/rest/landmarks.csv" > "$work/seeds.csv"

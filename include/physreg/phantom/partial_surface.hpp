@@ -48,8 +48,10 @@ LabelledPointCloud visible_surface_patch(const VolumeMesh& mesh, const std::vect
 /// PLY (ascii: x y z nx ny nz label) and CSV (x_mm,y_mm,z_mm,label) writers, atomic.
 void write_point_cloud_ply(const std::filesystem::path& path, const LabelledPointCloud& cloud);
 void write_point_cloud_csv(const std::filesystem::path& path, const LabelledPointCloud& cloud);
+/// CSV: a header x,y,z,label or x,y,z (any case, spaces allowed) or none (3 or 4 numbers per row
+/// from the first line); '#' lines are comments; without a label column every point is surface (0).
 LabelledPointCloud read_point_cloud_csv(const std::filesystem::path& path);
-/// A cloud by extension: .csv (x,y,z,label) or .ply (vertices; optional nx ny nz and an integer
+/// A cloud by extension: .csv (x,y,z[,label]) or .ply (vertices; optional nx ny nz and an integer
 /// "label"/"feature" property; unlabelled points are surface, 0). Throws Error naming the file for
 /// no points and non-finite coordinates or normals.
 LabelledPointCloud read_point_cloud(const std::filesystem::path& path);
