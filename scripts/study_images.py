@@ -110,7 +110,8 @@ for method in METHODS:
     for n in names:
         r = next((r for r in rows if r["case"] == n and r["method"] == method), None)
         cells.append("–|–|–" if r is None else
-                     f"{r['internal_tre_mm']:.2f} / {r['internal_tre_median_mm']:.2f} / {r['internal_tre_max_mm']:.2f} | {r['mean_dice']:.3f} | {r['seconds']:.1f}")
+                     f"{r['internal_tre_mm']:.2f} / {'–' if r['internal_tre_median_mm'] is None else format(r['internal_tre_median_mm'], '.2f')}"
+                     f" / {r['internal_tre_max_mm']:.2f} | {r['mean_dice']:.3f} | {r['seconds']:.1f}")
     lines.append(f"| {method} | " + " | ".join(cells) + " |")
 lines.append("")
 lines.append("| case | structure | initial E (Pa) | final E (Pa) | true E (Pa) | final / liver | true / liver |")

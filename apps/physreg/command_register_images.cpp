@@ -27,6 +27,7 @@
 
 #include <chrono>
 #include <fstream>
+#include <functional>
 #include <iostream>
 
 namespace physreg::cli {
@@ -199,19 +200,24 @@ struct MethodOutcome {
 
 json tre_json(const TreReport& report)
 {
-    const auto group = [&](const TreStats& s, LandmarkType type, bool all) {
+    // The median over exactly the landmarks the group's statistics count (compute_tre's grouping:
+    // internal = tumour and vessel; untyped landmarks count in "all" only). An empty group has no
+    // median: null, never a number copied from another group.
+    const auto group = [&](const TreStats& s, const std::function<bool(LandmarkType)>& member) {
         std::vector<double> e;
         for (const auto& entry : report.entries)
-            if (all || entry.type == type || (type == LandmarkType::unspecified && entry.type != LandmarkType::surface)) e.push_back(entry.error_mm);
+            if (member(entry.type)) e.push_back(entry.error_mm);
+        if (e.size() != s.count) fail("TRE summary: {} landmarks in a group whose statistics count {}", e.size(), s.count);
         std::sort(e.begin(), e.end());
-        const double median = e.empty() ? 0.0 : (e.size() % 2 ? e[e.size() / 2] : 0.5 * (e[e.size() / 2 - 1] + e[e.size() / 2]));
+        json median = nullptr;
+        if (!e.empty()) median = e.size() % 2 ? e[e.size() / 2] : 0.5 * (e[e.size() / 2 - 1] + e[e.size() / 2]);
         return json{{"count", s.count}, {"mean_mm", s.mean_mm}, {"median_mm", median}, {"max_mm", s.max_mm}, {"std_mm", s.std_mm}};
     };
     json per = json::object();
     for (const auto& e : report.entries) per[e.name] = e.error_mm;
-    return {{"all", group(report.all, LandmarkType::unspecified, true)},
-            {"surface", group(report.surface, LandmarkType::surface, false)},
-            {"internal", group(report.internal, LandmarkType::unspecified, false)},
+    return {{"all", group(report.all, [](LandmarkType) { return true; })},
+            {"surface", group(report.surface, [](LandmarkType t) { return t == LandmarkType::surface; })},
+            {"internal", group(report.internal, [](LandmarkType t) { return t == LandmarkType::tumour || t == LandmarkType::vessel; })},
             {"per_landmark_mm", per}};
 }
 

@@ -271,6 +271,22 @@ grep -q '\[info\]' "$work/err.txt" && failed "--quiet still printed info logs" |
 for key in '"biomechanical"' '"bspline_labels"' '"demons_labels"' '"rigid_labels"' '"dice"' '"internal"' '"estimated_moduli_pa"'; do
   grep -q "$key" "$work/ri/summary.json" && pass || failed "register-images summary lacks $key"
 done
+# Each TRE group's median is over the landmarks its count counts; an empty group has none (null).
+python3 - "$work/ri/summary.json" <<'PY' && pass || failed "register-images TRE medians match their groups' counts"
+import json, sys
+def walk(node):
+    if isinstance(node, dict):
+        if "median_mm" in node and "count" in node:
+            assert (node["median_mm"] is None) == (node["count"] == 0), node
+            if node["count"]:
+                assert node["median_mm"] <= node["max_mm"] + 1e-12, node
+        for value in node.values():
+            walk(value)
+    elif isinstance(node, list):
+        for value in node:
+            walk(value)
+walk(json.load(open(sys.argv[1])))
+PY
 expect_ok "register-images: the written field reads back" "$physreg" info "$work/ri/displacement.nii.gz"
 # A label map edited with Python's standard library: a label removed, or the image moved away.
 edit_nifti() { # IN OUT MODE(remove:LABEL | shift:MM)
