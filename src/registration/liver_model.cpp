@@ -17,6 +17,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <algorithm>
 #include <limits>
 #include <set>
@@ -191,28 +192,42 @@ void LiverModel::set_coupling_stiffness(const CouplingStiffness& stiffness)
     coupling.set_stiffness(stiffness);
 }
 
-Index3 default_liver_grid(const LabelVolume& rest_labels, const LabelRoles& roles, const Index3& cap)
+namespace {
+
+// The voxel index box of the labels `member` accepts; hi[0] < 0 when there are none.
+void voxel_extent(const LabelVolume& labels, const std::function<bool(std::int32_t)>& member, Index3& lo, Index3& hi)
 {
-    std::vector<char> model_label(65536, 0);
-    for (const auto* set : {&roles.liver, &roles.lesion, &roles.vessel})
-        for (const auto l : *set)
-            if (l >= 0 && l < 65536) model_label[static_cast<std::size_t>(l)] = 1;
-    const auto& size = rest_labels.geometry.size;
-    Index3 lo{size[0], size[1], size[2]}, hi{-1, -1, -1};
+    const auto& size = labels.geometry.size;
+    lo = {size[0], size[1], size[2]};
+    hi = {-1, -1, -1};
     for (std::int64_t k = 0; k < size[2]; ++k)
         for (std::int64_t j = 0; j < size[1]; ++j)
             for (std::int64_t i = 0; i < size[0]; ++i)
-                if (model_label[rest_labels.labels[static_cast<std::size_t>(i + size[0] * (j + size[1] * k))]]) {
+                if (member(labels.labels[static_cast<std::size_t>(i + size[0] * (j + size[1] * k))])) {
                     const Index3 at{i, j, k};
                     for (int a = 0; a < 3; ++a) {
                         lo[a] = std::min(lo[a], at[a]);
                         hi[a] = std::max(hi[a], at[a]);
                     }
                 }
-    if (hi[0] < 0) fail("default model grid: no liver label ({}) in the label map", fmt::join(roles.liver, ","));
+}
+
+// `cap` cells, or one per voxel along an axis the extent spans fewer voxels than that.
+Index3 grid_within(const Index3& lo, const Index3& hi, const Index3& cap)
+{
     Index3 grid;
     for (int a = 0; a < 3; ++a) grid[a] = std::max<std::int64_t>(2, std::min<std::int64_t>(cap[a], hi[a] - lo[a] + 1));
     return grid;
+}
+
+} // namespace
+
+Index3 default_liver_grid(const LabelVolume& rest_labels, const LabelRoles& roles, const Index3& cap)
+{
+    Index3 lo, hi;
+    voxel_extent(rest_labels, [&](std::int32_t l) { return roles.is_liver_tissue(l); }, lo, hi);
+    if (hi[0] < 0) fail("default model grid: no liver label ({}) in the label map", fmt::join(roles.liver, ","));
+    return grid_within(lo, hi, cap);
 }
 
 namespace {
@@ -281,25 +296,9 @@ Index3 default_model_grid(const LabelVolume& rest_labels, const LabelRoles& role
     if (std::none_of(rest_labels.labels.begin(), rest_labels.labels.end(), [&](auto l) { return roles.is_liver_tissue(l); }))
         fail("default model grid: no liver label ({}) in the label map", fmt::join(roles.liver, ","));
     // The body is the non-background region (every tissue lies inside it).
-    const auto& size = rest_labels.geometry.size;
-    Index3 lo{size[0], size[1], size[2]}, hi{-1, -1, -1};
-    for (std::int64_t k = 0; k < size[2]; ++k)
-        for (std::int64_t j = 0; j < size[1]; ++j)
-            for (std::int64_t i = 0; i < size[0]; ++i) {
-                const auto l = rest_labels.labels[static_cast<std::size_t>(i + size[0] * (j + size[1] * k))];
-                if (l > 0) {
-                    const Index3 at{i, j, k};
-                    for (int a = 0; a < 3; ++a) {
-                        lo[a] = std::min(lo[a], at[a]);
-                        hi[a] = std::max(hi[a], at[a]);
-                    }
-                }
-            }
-    if (hi[0] < 0) fail("default model grid: the label map is empty (only background)");
-    const Index3 cap{54, 40, 26};
-    Index3 grid;
-    for (int a = 0; a < 3; ++a) grid[a] = std::max<std::int64_t>(2, std::min<std::int64_t>(cap[a], hi[a] - lo[a] + 1));
-    return grid;
+    Index3 lo, hi;
+    voxel_extent(rest_labels, [](std::int32_t l) { return l > 0; }, lo, hi);
+    return grid_within(lo, hi, Index3{54, 40, 26});
 }
 
 LiverModel build_liver_model(const LabelVolume& rest_labels, const LabelRoles& roles, const ModelParameters& parameters,
