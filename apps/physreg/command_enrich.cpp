@@ -130,7 +130,7 @@ void add_subcommand_enrich(CLI::App& app)
         if (!b->positions.empty()) names = split_names(b->positions, "--positions");
         else
             for (const auto& s : loaded.dataset.states)
-                if (s.tool) names.push_back(s.name);
+                if (s.tool && s.kind == "compression") names.push_back(s.name); // not the organs-only push
         if (names.empty()) fail("dataset '{}' has no tool compression to take positions from", b->dataset);
         EnrichmentPlan plan;
         double deepest = 0.0;

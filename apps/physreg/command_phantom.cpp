@@ -36,6 +36,8 @@ void add_subcommand_phantom(CLI::App& app)
         std::uint64_t seed = 1;
         bool replace = false, no_calculix = false, organs_only = false;
         std::optional<double> load_step;
+        double push_depth = 0.0, push_tool_radius = 12.5;
+        int push_points = 500;
     };
     auto o = std::make_shared<Options>();
     auto* sub = app.add_subcommand("phantom", "Make a phantom experiment dataset: images, ground-truth compressions, landmarks, "
@@ -65,6 +67,10 @@ void add_subcommand_phantom(CLI::App& app)
     sub->add_option("--tool-axis", o->tool_axis, "Cylinder axis x,y,z (default 1,0,0)");
     sub->add_option("--tool-half-extents", o->tool_half_extents, "Box half extents x,y,z, mm (default 12,6,12)");
     sub->add_option("--insufflation-pa", o->insufflation_pa, "Pressure on the anterior organ surfaces, Pa (default 3 % of the parenchyma's E; 0: none)");
+    sub->add_option("--push-depth", o->push_depth, "Add the large local push (issue 32): a sphere pressed this far (mm, posterior) into the "
+                                                   "right lobe of the organs alone, seen as a sparse cloud over 90 % of the surface (default 0: none)");
+    sub->add_option("--push-tool-radius", o->push_tool_radius, "--push-depth: the sphere's radius, mm (default 12.5)");
+    sub->add_option("--push-points", o->push_points, "--push-depth: points in its sparse cloud (default 500)");
     sub->add_option("--landmark-noise", o->landmark_noise, "Annotation noise σ of landmarks_noisy.csv, mm (default 0.5)");
     sub->add_option("--surface-noise", o->surface_noise, "Noise σ of the partial surfaces, mm (default 0.5)");
     sub->add_option("-o,--output", o->output, "Dataset directory (created; must not exist or be empty unless --force)")->required();
@@ -125,6 +131,9 @@ void add_subcommand_phantom(CLI::App& app)
         if (o->compressions.empty() && direction.normalized() != Vec3::UnitY())
             logger()->info("--tool-direction applies to --compression entries; the default five press along +y");
         spec.insufflation_pa = o->insufflation_pa;
+        spec.push_depth_mm = o->push_depth;
+        spec.push_tool_radius_mm = o->push_tool_radius;
+        spec.push_cloud_points = o->push_points;
         if (o->landmark_noise) spec.landmark_noise_mm = *o->landmark_noise;
         if (o->surface_noise) spec.surface_noise_mm = *o->surface_noise;
         spec.validate();

@@ -21,11 +21,13 @@
 #include "physreg/phantom/landmark_picking.hpp"
 #include "physreg/mechanics/embedded_beams.hpp"
 #include "physreg/mechanics/membrane.hpp"
+#include "physreg/mechanics/stiffness_assembly.hpp"
 #include "physreg/registration/surface_model.hpp"
 #include "physreg/registration/surface_registration.hpp"
 
 #include <chrono>
 #include <fstream>
+#include <sstream>
 #include <iostream>
 
 namespace physreg::cli {
@@ -36,10 +38,12 @@ namespace {
 
 struct Options : CommonOptions {
     std::string dataset, state = "insufflation", labels, surface, region_seeds, model, regions, cloud, landmarks, landmarks_truth, truth_surface, output;
-    std::string liver_labels, method = "biomechanical", material = "healthy", support = "none", model_kind = "homogeneous";
+    std::string liver_labels, method = "biomechanical", material = "healthy", support = "posterior", model_kind = "homogeneous";
+    std::string support_points, support_nodes;
+    double support_radius = 10.0, support_stiffness = 0.0, support_tolerance = 3.0;
     double capsule_thickness = MembraneMaterial{}.thickness_mm, vessel_scale = 1.0, vessel_radius = 1.5, region_radius = 15.0, surface_scale = 1.0;
     std::string vessels;
-    int visible = 30;
+    std::optional<int> visible;
     std::optional<double> notch_x, young_modulus;
     double poisson = 0.45, cell_size = 7.0, field_spacing = 2.0;
     double d90 = 5.0, traction = 0.5, distance_fraction = 0.9, normal_agreement = 0.7, time_step = 0.1, plateau_tolerance = 0.01, max_pair = 40.0;
@@ -87,11 +91,13 @@ Inputs load_inputs(const Options& o)
         const DatasetState& rest = dataset.state("rest");
         const DatasetState& state = dataset.state(o.state);
         if (state.kind == "rest") fail("register-surface: --state {} is the rest state; choose a deformed one", o.state);
-        const auto surface = state.surfaces.find(o.visible);
+        // --visible: as asked; else the state's only cloud (the push's sparse one), else 30 %.
+        const int visible = o.visible ? *o.visible : state.surfaces.size() == 1 ? state.surfaces.begin()->first : 30;
+        const auto surface = state.surfaces.find(visible);
         if (surface == state.surfaces.end()) {
             std::string available;
             for (const auto& [p, f] : state.surfaces) available += (available.empty() ? "" : ", ") + std::to_string(p);
-            fail("register-surface: state {} has no partial surface with {} % visible (available: {})", o.state, o.visible, available);
+            fail("register-surface: state {} has no partial surface with {} % visible (available: {})", o.state, visible, available);
         }
         const LabelVolume labels = read_label_volume(dataset.path(rest.files.at("labels")));
         std::set<std::int32_t> liver;
@@ -115,7 +121,7 @@ Inputs load_inputs(const Options& o)
             in.vessels = read_vessel_centrelines(o.vessels, o.vessel_scale, o.vessel_radius);
         else if (rest.files.count("vessel_centrelines"))
             in.vessels = read_vessel_centrelines(dataset.path(rest.files.at("vessel_centrelines")), 1.0, 1.0);
-        in.description = {{"dataset", o.dataset}, {"state", o.state}, {"visible_percent", o.visible}, {"cloud", surface->second.first},
+        in.description = {{"dataset", o.dataset}, {"state", o.state}, {"visible_percent", visible}, {"cloud", surface->second.first},
                           {"regions", "from the rest label map (anatomical rule; notch from the label map)"}};
         return in;
     }
@@ -185,6 +191,87 @@ Inputs load_inputs(const Options& o)
     return in;
 }
 
+struct Supports {
+    std::vector<std::int32_t> nodes; ///< sorted, unique
+    json sources = json::array();
+};
+
+std::vector<std::int32_t> read_node_ids(const std::string& path, std::size_t node_count)
+{
+    const std::string what = "--support-nodes '" + path + "'";
+    require_existing_file(path, what);
+    std::ifstream in(path);
+    std::vector<std::int32_t> ids;
+    std::string line;
+    int number = 0;
+    while (std::getline(in, line)) {
+        ++number;
+        const auto hash = line.find('#');
+        if (hash != std::string::npos) line.resize(hash);
+        for (auto& c : line)
+            if (c == ',' || c == ';' || c == '\t' || c == '\r') c = ' ';
+        std::istringstream words(line);
+        std::string word;
+        while (words >> word) {
+            const auto v = parse_number(word);
+            if (!v) {
+                if (ids.empty() && number == 1 && (word == "node" || word == "id" || word == "node_id")) continue; // a header
+                fail("{}: line {}: '{}' is not a node id", what, number, word);
+            }
+            const auto id = to_integer<std::int32_t>(*v, what, "a node id");
+            if (id < 0 || static_cast<std::size_t>(id) >= node_count) fail("{}: line {}: node {} is not a node of the model (0 … {})", what, number, id, node_count - 1);
+            ids.push_back(id);
+        }
+    }
+    if (ids.empty()) fail("{}: no node id", what);
+    return ids;
+}
+
+/// The anatomical supports: the posterior surface, picked points (with a radius) and node ids, together.
+Supports select_supports(const Options& o, const Inputs& in)
+{
+    Supports s;
+    if (!(o.support_stiffness >= 0) || !std::isfinite(o.support_stiffness))
+        fail("--support-stiffness {} N/mm must be ≥ 0 (0: held)", o.support_stiffness);
+    if (!(o.support_tolerance > 0) || !std::isfinite(o.support_tolerance)) fail("--support-tolerance {} mm must be > 0", o.support_tolerance);
+    if (o.support == "posterior") {
+        const auto nodes = surface_nodes_facing(in.mesh, in.surface, Vec3::UnitY(), 0.5);
+        if (nodes.empty()) fail("--support posterior: no surface node faces posterior (+y) in the model");
+        s.nodes.insert(s.nodes.end(), nodes.begin(), nodes.end());
+        s.sources.push_back({{"source", "posterior"}, {"rule", "surface nodes whose normal · +y > 0.5"}, {"nodes", nodes.size()}});
+    } else if (o.support != "none") {
+        fail("--support '{}': use posterior (default) or none (paper 001's free model)", o.support);
+    }
+    if (!o.support_points.empty()) {
+        std::vector<Vec3> points;
+        for (const auto& l : read_landmarks(o.support_points)) points.push_back(l.position);
+        const auto nodes = surface_nodes_near(in.mesh, in.surface, points, o.support_radius);
+        if (nodes.empty())
+            fail("--support-points '{}': no surface node within --support-radius {} mm of its {} point(s) (are they on the model's surface, mm, LPS?)",
+                 o.support_points, o.support_radius, points.size());
+        s.nodes.insert(s.nodes.end(), nodes.begin(), nodes.end());
+        s.sources.push_back({{"source", o.support_points}, {"points", points.size()}, {"radius_mm", o.support_radius}, {"nodes", nodes.size()}});
+    }
+    if (!o.support_nodes.empty()) {
+        const auto nodes = read_node_ids(o.support_nodes, in.mesh.node_count());
+        s.nodes.insert(s.nodes.end(), nodes.begin(), nodes.end());
+        s.sources.push_back({{"source", o.support_nodes}, {"nodes", nodes.size()}});
+    }
+    std::sort(s.nodes.begin(), s.nodes.end());
+    s.nodes.erase(std::unique(s.nodes.begin(), s.nodes.end()), s.nodes.end());
+    std::set<std::int32_t> surface_nodes;
+    for (const auto& t : in.surface.triangles) surface_nodes.insert(t.begin(), t.end());
+    std::size_t on_surface = 0;
+    for (const auto n : s.nodes) on_surface += surface_nodes.count(n);
+    if (!s.nodes.empty() && on_surface >= surface_nodes.size())
+        fail("--support {}{}: the supports take every one of the {} surface nodes; nothing is left free to meet the cloud", o.support,
+             o.support_points.empty() && o.support_nodes.empty() ? "" : " with --support-points/--support-nodes", surface_nodes.size());
+    if (!s.nodes.empty())
+        logger()->info("register-surface: {} support nodes {}", s.nodes.size(),
+                       o.support_stiffness > 0 ? fmt::format("on springs of {} N/mm", o.support_stiffness) : std::string("held at rest"));
+    return s;
+}
+
 double young_modulus(const Options& o)
 {
     if (o.young_modulus) return *o.young_modulus;
@@ -201,10 +288,21 @@ struct MethodOutcome {
 };
 
 json evaluate(const MethodOutcome& m, const Inputs& in, const std::vector<NodeEmbedding>& landmark_cells, const std::vector<std::uint8_t>& node_used,
-              const std::vector<std::optional<Vec3>>& truth_at_nodes)
+              const std::vector<std::optional<Vec3>>& truth_at_nodes, const std::function<double(const std::vector<double>&)>& strain_energy_mj)
 {
     json r = m.details;
     r["seconds"] = m.seconds;
+    // What a user can judge a result by without the truth (issue 32's safeguard).
+    std::vector<double> rest(3 * in.mesh.node_count());
+    for (std::size_t n = 0; n < in.mesh.node_count(); ++n)
+        for (int d = 0; d < 3; ++d) rest[3 * n + static_cast<std::size_t>(d)] = in.mesh.nodes[n][d];
+    const RigidMotion pose = implied_rigid_motion(rest, m.u);
+    double largest = 0.0;
+    for (std::size_t i = 0; i < m.u.size(); i += 3) largest = std::max(largest, std::hypot(m.u[i], m.u[i + 1], m.u[i + 2]));
+    r["largest_displacement_mm"] = largest;
+    r["strain_energy_mj"] = strain_energy_mj(m.u);
+    r["implied_rigid_motion"] = {{"rotation_deg", pose.angle_deg}, {"translation_mm", {pose.translation[0], pose.translation[1], pose.translation[2]}},
+                                 {"non_rigid_rms_mm", pose.residual_rms_mm}};
     const SurfaceMesh deformed = regions_surface(in.mesh, in.surface, &m.u);
     const SurfaceDistance fit = points_to_surface(in.cloud.points, deformed, "cloud to model");
     r["cloud_to_model_mm"] = {{"mean", fit.mean_mm}, {"max", fit.max_mm}};
@@ -229,6 +327,37 @@ json evaluate(const MethodOutcome& m, const Inputs& in, const std::vector<NodeEm
         r["node_tre_mm"] = {{"nodes", s.count}, {"mean", s.mean_mm}, {"max", s.max_mm}, {"std", s.std_mm}};
     }
     return r;
+}
+
+/// Whether the data decide between the methods (issue 32): two methods that fit the cloud about
+/// equally well (mean distances within 0.5 mm or 25 %) but place the model differently (nodal RMS
+/// difference over 2 mm and over 3× their fit) are two answers the cloud cannot tell apart; so is a
+/// rigid fit whose starts found far-apart poses of equal fit.
+json determinacy(const std::vector<MethodOutcome>& outcomes, const json& methods, bool rigid_pose_determined)
+{
+    json notes = json::array();
+    bool determined = rigid_pose_determined;
+    if (!rigid_pose_determined) notes.push_back("rigid starts found poses rotated more than 10° apart that fit the cloud within 10 % of each other");
+    for (std::size_t a = 0; a < outcomes.size(); ++a)
+        for (std::size_t b = a + 1; b < outcomes.size(); ++b) {
+            const auto& ma = outcomes[a];
+            const auto& mb = outcomes[b];
+            if (ma.name == "at_rest" || mb.name == "at_rest") continue;
+            const double fa = methods[ma.name]["cloud_to_model_mm"]["mean"].get<double>(), fb = methods[mb.name]["cloud_to_model_mm"]["mean"].get<double>();
+            double sum = 0.0;
+            for (std::size_t i = 0; i < ma.u.size(); ++i) sum += (ma.u[i] - mb.u[i]) * (ma.u[i] - mb.u[i]);
+            const double rms = std::sqrt(3.0 * sum / static_cast<double>(ma.u.size()));
+            const bool alike = std::abs(fa - fb) <= std::max(0.5, 0.25 * std::min(fa, fb));
+            if (alike && rms > std::max(2.0, 3.0 * std::max(fa, fb))) {
+                determined = false;
+                notes.push_back(fmt::format("{} and {} fit the cloud alike ({:.2f} and {:.2f} mm) but place the model {:.1f} mm apart (nodal RMS)", ma.name,
+                                            mb.name, fa, fb, rms));
+            }
+        }
+    json out = {{"pose_determined", determined}, {"notes", notes}};
+    out["statement"] = determined ? "the methods that fit the data agree within what the data resolve"
+                                  : "the data do not determine the pose: the results below are alternatives the cloud cannot tell apart";
+    return out;
 }
 
 } // namespace
@@ -273,7 +402,16 @@ void add_subcommand_register_surface(CLI::App& app)
     sub->add_option("--distance-fraction", o->distance_fraction, "Pruning d_t: keep pairs closer than d_t × the largest (default 0.9)");
     sub->add_option("--max-pair-distance", o->max_pair, "Pairs longer than this are dropped (a cloud that does not belong to the model), mm (default 40)");
     sub->add_option("--normal-agreement", o->normal_agreement, "Pruning n_t: keep pairs whose normals agree ≥ n_t (default 0.7)");
-    sub->add_option("--support", o->support, "none (default, paper 001) or posterior: surface nodes facing posterior (normal · +y > 0.5) held at rest");
+    sub->add_option("--support", o->support, "posterior (default: surface nodes facing posterior, normal · +y > 0.5, where the vena cava and "
+                                             "ligaments hold a liver) or none (paper 001's free model)");
+    sub->add_option("--support-points", o->support_points, "Further support: surface nodes within --support-radius of these points (landmark "
+                                                           "file: CSV, .fcsv, .mrk.json; e.g. ligaments, vena cava)");
+    sub->add_option("--support-radius", o->support_radius, "--support-points: radius, mm (default 10)");
+    sub->add_option("--support-nodes", o->support_nodes, "Further support: a file of model node ids (one or more per line, '#' comments)");
+    sub->add_option("--support-stiffness", o->support_stiffness, "0 (default): supports held; > 0: springs of this stiffness, N/mm per node "
+                                                                 "and direction, to the rest position (ligaments stretch)");
+    sub->add_option("--support-tolerance", o->support_tolerance, "Rigid baselines: a pose that moves a support node farther than this is "
+                                                                 "implausible, mm (default 3)");
     sub->add_option("--time-step", o->time_step, "Backward Euler time step, s (default 0.1)");
     sub->add_option("--plateau-tolerance", o->plateau_tolerance, "A plateau ends when no node moves more than this in a step, mm (default 0.01)");
     sub->add_option("--newton-per-step", o->newton_per_step, "Newton iterations per time step (default 1: linearised backward Euler; 0: to convergence)");
@@ -326,12 +464,9 @@ void add_subcommand_register_surface(CLI::App& app)
         options.newton_iterations_per_step = o->newton_per_step;
         if (capsule) options.structures.push_back(&*capsule);
         if (beams) options.structures.push_back(&*beams);
-        if (o->support == "posterior") {
-            options.fixed_nodes = surface_nodes_facing(in.mesh, in.surface, Vec3::UnitY(), 0.5);
-            logger()->info("register-surface: {} posterior surface nodes held at rest", options.fixed_nodes.size());
-        } else if (o->support != "none") {
-            fail("--support '{}': use none or posterior", o->support);
-        }
+        const Supports supports = select_supports(*o, in);
+        options.fixed_nodes = supports.nodes;
+        options.support_stiffness_n_per_mm = o->support_stiffness;
         const double spacing = mean_point_spacing_mm(in.cloud.points);
         const double k_max = pair_stiffness_n(o->traction, E, spacing);
         options.schedules = paper001_schedules(k_max);
@@ -343,11 +478,25 @@ void add_subcommand_register_surface(CLI::App& app)
             MethodOutcome at_rest{"at_rest", std::vector<double>(3 * in.mesh.node_count(), 0.0), 0.0, json::object()};
             outcomes.push_back(at_rest);
         }
+        bool rigid_pose_determined = true;
         for (const bool labelled : {true, false}) {
-            const RigidSurfaceResult r = register_surface_rigid(model.rest_positions(), matcher, in.cloud, options.matching, labelled);
+            RobustRigidOptions robust;
+            robust.supports = options.fixed_nodes;
+            robust.support_tolerance_mm = o->support_tolerance;
+            const auto start_rigid = std::chrono::steady_clock::now();
+            const RobustRigidResult rr = register_surface_rigid_robust(model.rest_positions(), matcher, in.cloud, options.matching, labelled, robust);
+            const RigidSurfaceResult& r = rr.chosen;
+            json alternatives = json::array();
+            for (const auto& c : rr.candidates)
+                alternatives.push_back({{"start", c.start}, {"rotation_deg", Eigen::AngleAxisd(c.result.rotation).angle() * 180.0 / M_PI},
+                                        {"cloud_to_model_mean_mm", c.cloud_mean_mm}, {"support_motion_mm", c.support_motion_mm},
+                                        {"plausible", c.plausible}, {"chosen", c.start == rr.chosen_start}});
             json d = {{"iterations", r.iterations}, {"converged", r.converged}, {"pairs", r.matching.kept},
-                      {"rotation_deg", Eigen::AngleAxisd(r.rotation).angle() * 180.0 / M_PI}, {"translation_mm", {r.translation[0], r.translation[1], r.translation[2]}}};
-            outcomes.push_back({labelled ? "rigid" : "icp", r.displacement_mm, r.seconds, d});
+                      {"rotation_deg", Eigen::AngleAxisd(r.rotation).angle() * 180.0 / M_PI}, {"translation_mm", {r.translation[0], r.translation[1], r.translation[2]}},
+                      {"start", rr.chosen_start}, {"decision", rr.decision}, {"pose_determined", rr.pose_determined}, {"alternatives", alternatives}};
+            rigid_pose_determined = rigid_pose_determined && rr.pose_determined;
+            outcomes.push_back({labelled ? "rigid" : "icp", r.displacement_mm,
+                                std::chrono::duration<double>(std::chrono::steady_clock::now() - start_rigid).count(), d});
         }
         bar.update(0.05, "biomechanical registration");
         const SurfaceRegistrationResult b = register_surface_biomechanical(model, matcher, in.cloud, options, [&](double f, const std::string& m) {
@@ -385,8 +534,15 @@ void add_subcommand_register_surface(CLI::App& app)
                 truth_at_nodes.emplace_back(Vec3(d[0], d[1], d[2]));
             }
         }
+        const StiffnessAssembler energy_assembler(model, nullptr, {});
+        const auto strain_energy = [&](const std::vector<double>& u) {
+            double e = energy_assembler.energy(u.data()).energy_mj;
+            std::vector<double> scratch(u.size(), 0.0);
+            for (const auto* s : options.structures) e += s->add_forces(u.data(), scratch.data());
+            return e;
+        };
         json methods;
-        for (const auto& m : outcomes) methods[m.name] = evaluate(m, in, landmark_cells, used, truth_at_nodes);
+        for (const auto& m : outcomes) methods[m.name] = evaluate(m, in, landmark_cells, used, truth_at_nodes, strain_energy);
         const MethodOutcome& chosen = *std::find_if(outcomes.begin(), outcomes.end(), [&](const MethodOutcome& m) { return m.name == o->method; });
 
         MeshData data;
@@ -406,6 +562,19 @@ void add_subcommand_register_surface(CLI::App& app)
         summary["method"] = o->method;
         summary["support"] = o->support;
         summary["support_nodes"] = options.fixed_nodes.size();
+        summary["supports"] = {{"sources", supports.sources}, {"kind", o->support_stiffness > 0 ? "elastic" : "held"},
+                               {"stiffness_n_per_mm", o->support_stiffness}, {"nodes", options.fixed_nodes},
+                               {"rigid_plausibility_tolerance_mm", o->support_tolerance}};
+        summary["determinacy"] = determinacy(outcomes, methods, rigid_pose_determined);
+        if (in.truth_mesh) {
+            // The pose the ground truth implies, to judge the baselines' rotations by (reports only).
+            std::vector<double> truth_rest;
+            for (const auto& x : in.truth_mesh->nodes) truth_rest.insert(truth_rest.end(), {x[0], x[1], x[2]});
+            const RigidMotion pose = implied_rigid_motion(truth_rest, in.truth_displacement);
+            summary["truth"] = {{"implied_rigid_motion", {{"rotation_deg", pose.angle_deg},
+                                                          {"translation_mm", {pose.translation[0], pose.translation[1], pose.translation[2]}},
+                                                          {"non_rigid_rms_mm", pose.residual_rms_mm}}}};
+        }
         summary["model"] = {{"kind", o->model_kind}, {"element", "linear tetrahedra (CGAL Mesh_3), co-rotational"}, {"nodes", in.mesh.node_count()},
                             {"tetrahedra", in.mesh.cell_count()}, {"surface_triangles", in.surface.triangles.size()},
                             {"young_modulus_pa", E}, {"poisson_ratio", o->poisson}};
@@ -448,6 +617,10 @@ void add_subcommand_register_surface(CLI::App& app)
             std::cout << summary.dump(2) << "\n";
         else
             for (const char* name : {"at_rest", "icp", "rigid", "biomechanical"}) std::cerr << line(name) << "\n";
+        if (!summary["determinacy"]["pose_determined"].get<bool>()) {
+            logger()->warn("register-surface: {}", summary["determinacy"]["statement"].get<std::string>());
+            for (const auto& note : summary["determinacy"]["notes"]) logger()->warn("  {}", note.get<std::string>());
+        }
     });
 }
 

@@ -194,6 +194,43 @@ def accuracy_section(summary):
     return out
 
 
+def safeguard_section(summary):
+    """register-surface: what each result can be judged by without the truth, and whether the data
+    decide between them (issue 32)."""
+    methods = summary.get("methods")
+    determinacy = summary.get("determinacy")
+    if not isinstance(methods, dict) or not isinstance(determinacy, dict):
+        return ""
+    out = "<h2>Safeguard: what the data decide</h2>"
+    statement = esc(determinacy.get("statement", ""))
+    if determinacy.get("pose_determined") is False:
+        notes = "".join(f"<li>{esc(n)}</li>" for n in determinacy.get("notes", []))
+        out += f"<p style='color:#a00'><b>{statement}</b></p><ul>{notes}</ul>"
+    else:
+        out += f"<p>{statement}.</p>"
+    truth = summary.get("truth", {}).get("implied_rigid_motion") if isinstance(summary.get("truth"), dict) else None
+    head = "<tr><th>method</th><th>cloud → model mean</th><th>strain energy</th><th>largest displacement</th><th>implied rotation</th><th>rigid start</th></tr>"
+    body = []
+    for name in sorted(methods, key=lambda m: (METHOD_ORDER.index(m) if m in METHOD_ORDER else 99, m)):
+        m = methods[name]
+        fit = (m.get("cloud_to_model_mm") or {}).get("mean")
+        energy = m.get("strain_energy_mj")
+        largest = m.get("largest_displacement_mm")
+        rotation = (m.get("implied_rigid_motion") or {}).get("rotation_deg")
+        cells = [esc(name), "–" if fit is None else f"{fit:.2f} mm", "–" if energy is None else f"{energy:.3g} mJ",
+                 "–" if largest is None else f"{largest:.1f} mm", "–" if rotation is None else f"{rotation:.1f}°", esc(m.get("start", "–"))]
+        body.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    out += f"<table>{head}{''.join(body)}</table>"
+    if truth:
+        out += f"<p>The ground truth implies a rotation of {truth['rotation_deg']:.1f}° (for judging the baselines; no method reads it).</p>"
+    supports = summary.get("supports")
+    if isinstance(supports, dict):
+        out += (f"<p>Supports: {len(supports.get('nodes', []))} nodes, {esc(supports.get('kind', '?'))}"
+                + (f" ({supports.get('stiffness_n_per_mm')} N/mm)" if supports.get("kind") == "elastic" else "")
+                + "; from " + esc(", ".join(str(s.get("source")) for s in supports.get("sources", [])) or "none") + ".</p>")
+    return out
+
+
 def per_landmark_errors(summary, folder):
     """{method: {name: (error_mm, type)}}."""
     result = {}
@@ -452,6 +489,7 @@ def build_report(folder, shown_as=None):
         key_value_table("Parameters", summary.get("parameters", {}) if isinstance(summary.get("parameters"), dict) else {}),
         key_value_table("Model", summary.get("model", {}) if isinstance(summary.get("model"), dict) else {}),
         accuracy_section(summary),
+        safeguard_section(summary),
         per_landmark_section(summary, folder),
         slices_section(summary, folder),
         displacement_section(folder),

@@ -134,6 +134,10 @@ void PhantomSpec::validate() const
     if (!(surface_noise_mm >= 0.0 && surface_noise_mm <= 10.0)) fail("phantom: surface noise {} mm outside [0, 10]", surface_noise_mm);
     for (const int p : surface_percentages)
         if (p <= 0 || p > 100) fail("phantom: surface percentage {} outside 1 … 100", p);
+    if (!(push_depth_mm >= 0.0 && push_depth_mm <= 80.0)) fail("phantom: --push-depth {} mm outside [0, 80]", push_depth_mm);
+    if (!(push_tool_radius_mm >= 2.0 && push_tool_radius_mm <= 50.0)) fail("phantom: --push-tool-radius {} mm outside [2, 50]", push_tool_radius_mm);
+    if (push_cloud_points < 3 || push_cloud_points > 1000000) fail("phantom: --push-points {} outside 3 … 1000000", push_cloud_points);
+    if (!(push_cloud_coverage > 0.0 && push_cloud_coverage <= 1.0)) fail("phantom: push cloud coverage {} outside (0, 1]", push_cloud_coverage);
 }
 
 const DatasetState& PhantomDataset::state(const std::string& name) const
@@ -346,10 +350,9 @@ struct SolvedState {
 
 /// One attempt with the tool as given. A tool that slips between the ground truth's surface nodes
 /// (whole cells end inside it) is reported in `slipped`, not as an error: the caller may retry.
-SolvedState solve_compression_once(const GroundTruth& gt, const PhantomSpec& spec, const Prepared& p, const CompressionSpec& c,
+SolvedState solve_compression_once(const GroundTruthModel& m, const PhantomSpec& spec, const Prepared& p, const CompressionSpec& c,
                                    std::string& slipped)
 {
-    const GroundTruthModel& m = gt.body;
     const Vec3 d = c.direction.normalized();
     const auto& g = p.labels.geometry;
     Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
@@ -434,7 +437,7 @@ SolvedState solve_compression_once(const GroundTruth& gt, const PhantomSpec& spe
 /// The dataset records the tool actually used (the registration reads it) and why it grew, so a
 /// study looping over seeds does not stop on a seed whose skin mesh happens to be coarse under the
 /// tool (seeds 11 and 12 of the small preset did).
-SolvedState solve_compression(const GroundTruth& gt, const PhantomSpec& spec, const Prepared& p, const CompressionSpec& c)
+SolvedState solve_compression(const GroundTruthModel& m, const PhantomSpec& spec, const Prepared& p, const CompressionSpec& c)
 {
     constexpr int attempts = 4;
     constexpr double growth = 1.25;
@@ -443,7 +446,7 @@ SolvedState solve_compression(const GroundTruth& gt, const PhantomSpec& spec, co
     for (int attempt = 1;; ++attempt) {
         std::string slipped;
         try {
-            SolvedState s = solve_compression_once(gt, spec, p, tried, slipped);
+            SolvedState s = solve_compression_once(m, spec, p, tried, slipped);
             if (slipped.empty()) {
                 s.requested_tool_scale = scale;
                 if (scale > 1.0)
@@ -486,6 +489,29 @@ SolvedState solve_insufflation(const GroundTruth& gt, double pressure_pa)
     s.u = s.solve.displacement_mm;
     s.pressure_pa = pressure_pa;
     return s;
+}
+
+/// Issue 32's large local push: the column over the right lobe (the liver's right 45 % in x, its
+/// middle half in z) through the most liver, pressed posterior. Throws Error when no column is
+/// thick enough for the depth (the solve refuses a depth over 60 % of the thickness).
+CompressionSpec push_compression(const Prepared& p, const PhantomSpec& spec, const Vec3& lo, const Vec3& hi, double image_length)
+{
+    CompressionSpec c;
+    c.name = "push";
+    c.depth_mm = spec.push_depth_mm;
+    c.tool.radius_mm = spec.push_tool_radius_mm;
+    const Vec3 start_y(0, lo.y() - 0.5 * image_length, 0);
+    double best = 0.0;
+    for (double x = lo.x() + 0.1 * (hi.x() - lo.x()); x <= lo.x() + 0.45 * (hi.x() - lo.x()); x += 2.0)
+        for (double z = lo.z() + 0.25 * (hi.z() - lo.z()); z <= lo.z() + 0.75 * (hi.z() - lo.z()); z += 2.0) {
+            const double thickness = length_inside(p.labels, Vec3(x, start_y.y(), z), Vec3::UnitY(), 2 * image_length,
+                                                   [&](std::int32_t l) { return p.roles.is_liver_tissue(l); });
+            if (thickness > best) best = thickness, c.x_mm = x, c.z_mm = z;
+        }
+    if (c.depth_mm > 0.6 * best)
+        fail("phantom: --push-depth {} mm: the right lobe is at most {:.0f} mm thick, so the push can go at most {:.0f} mm (60 %)", c.depth_mm, best,
+             0.6 * best);
+    return c;
 }
 
 json to_json(const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); }
@@ -792,7 +818,21 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
                 write_vessel_centrelines(f, cirs057a_vessel_centrelines());
             });
         json surfaces = json::object();
-        if (solved) {
+        if (solved && kind == "push") {
+            // Sparse, unlabelled, over nearly the whole surface: all but the back and what the tool covers.
+            const Indenter& tool = *solved->tool;
+            double covered = 0.0;
+            const auto cloud = sparse_surface_cloud(mesh, u, view.liver_surface, spec.push_cloud_coverage, spec.push_cloud_points,
+                                                    [&](const Vec3& x) { Vec3 s, n; return tool.push_out(x, 1.0, s, n); }, spec.surface_noise_mm,
+                                                    mix_seed(spec.seed, "surface/" + name), &covered);
+            const int percent = static_cast<int>(std::lround(100 * covered));
+            const std::string stem = fmt::format("{}/sparse_cloud_{:03d}", dir, percent);
+            surfaces[std::to_string(percent)] = {
+                {"ply", write_file(root, stem + ".ply", [&](const fs::path& f) { write_point_cloud_ply(f, cloud); })},
+                {"csv", write_file(root, stem + ".csv", [&](const fs::path& f) { write_point_cloud_csv(f, cloud); })},
+                {"points", cloud.points.size()},
+                {"kind", "sparse unlabelled cloud over the surface but its back and the tool's footprint"}};
+        } else if (solved) {
             for (const int percent : spec.surface_percentages) {
                 const auto cloud = visible_surface_patch(mesh, u, view.liver_surface, percent / 100.0, Vec3::UnitY(), spec.surface_noise_mm,
                                                          mix_seed(spec.seed, fmt::format("surface/{}/{}", name, percent)));
@@ -863,7 +903,7 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
 #pragma omp parallel for schedule(dynamic, 1) num_threads(solvers)
     for (long c = 0; c < static_cast<long>(compressions.size()); ++c) {
         try {
-            solved_compressions[static_cast<std::size_t>(c)] = solve_compression(gt, spec, p, compressions[static_cast<std::size_t>(c)]);
+            solved_compressions[static_cast<std::size_t>(c)] = solve_compression(gt.body, spec, p, compressions[static_cast<std::size_t>(c)]);
         } catch (...) {
             failures[static_cast<std::size_t>(c)] = std::current_exception();
         }
@@ -910,6 +950,18 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
                                                        {"note", "moving = pre-operative labels, reference = after the pressure load; each organ deforms with its own stiffness and support"}}});
     } else {
         manifest["segmentation_pairs"] = json::array();
+    }
+    if (spec.push_depth_mm > 0) {
+        report(0.97, "large local push: solving");
+        t = std::chrono::steady_clock::now();
+        const CompressionSpec c = push_compression(p, spec, liver_lo, liver_hi, image_length);
+        const SolvedState solved = solve_compression(gt.insufflation_model(), spec, p, c);
+        timings["solve_push_s"] = solved.solve.seconds;
+        logger()->info("push: {} mm by a {:.0f} mm tool on the {} model, {} Newton iterations, {:.1f} s, max displacement {:.2f} mm", c.depth_mm,
+                       2 * solved.tool->radius_mm, gt.insufflation_model().name, solved.solve.newton_iterations, solved.solve.seconds,
+                       solved.solve.max_displacement_mm);
+        write_state("push", "push", &solved, insufflation_view);
+        timings["state_push_s"] = seconds_since(t);
     }
     manifest["states"] = states;
     write_text(root / "manifest.json", manifest.dump(2) + "\n");

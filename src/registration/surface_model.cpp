@@ -148,6 +148,24 @@ std::vector<std::int32_t> surface_nodes_facing(const VolumeMesh& mesh, const Lab
     return out;
 }
 
+std::vector<std::int32_t> surface_nodes_near(const VolumeMesh& mesh, const LabelledTriangles& surface, const std::vector<Vec3>& points, double radius_mm)
+{
+    if (!(radius_mm > 0) || !std::isfinite(radius_mm)) fail("support radius {} mm must be > 0", radius_mm);
+    std::vector<std::uint8_t> on(mesh.node_count(), 0);
+    for (const auto& t : surface.triangles)
+        for (auto n : t) on[static_cast<std::size_t>(n)] = 1;
+    std::vector<std::int32_t> out;
+    for (std::size_t n = 0; n < on.size(); ++n) {
+        if (!on[n]) continue;
+        for (const auto& p : points)
+            if ((mesh.nodes[n] - p).norm() <= radius_mm) {
+                out.push_back(static_cast<std::int32_t>(n));
+                break;
+            }
+    }
+    return out;
+}
+
 LabelledTriangles unlabelled_boundary(const VolumeMesh& mesh)
 {
     LabelledTriangles out = labelled_boundary(mesh, std::nullopt);

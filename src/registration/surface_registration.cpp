@@ -3,7 +3,9 @@
 
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
+#include "physreg/evaluation/surface_distance.hpp"
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <chrono>
 #include <cmath>
@@ -50,6 +52,10 @@ void SurfaceRegistrationOptions::validate() const
         fail("surface registration: plateau tolerance {} mm must be > 0", plateau_tolerance_mm);
     if (newton_iterations_per_step < 0) fail("surface registration: Newton iterations per step {} must be ≥ 0", newton_iterations_per_step);
     if (max_steps_per_plateau < 1) fail("surface registration: max steps per plateau {} must be ≥ 1", max_steps_per_plateau);
+    if (!(support_stiffness_n_per_mm >= 0 && std::isfinite(support_stiffness_n_per_mm)))
+        fail("surface registration: support stiffness {} N/mm must be ≥ 0 (0: held)", support_stiffness_n_per_mm);
+    for (const auto node : fixed_nodes)
+        if (node < 0) fail("surface registration: support node {} is not a node id", node);
 }
 
 std::map<std::int32_t, AnnealingSchedule> paper001_schedules(double k_max_n)
@@ -108,9 +114,18 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
             std::fill(forces.begin(), forces.end(), 0.0);
             std::fill(stiffness.begin(), stiffness.end(), 0.0);
             accumulate_pair_forces(pairs, matcher.source(), report.stiffness_n, options.force, forces, &stiffness);
+            const bool elastic_support = options.support_stiffness_n_per_mm > 0;
+            if (elastic_support)
+                for (const auto node : options.fixed_nodes)
+                    for (int d = 0; d < 3; ++d) {
+                        const auto q = 3 * static_cast<std::size_t>(node) + static_cast<std::size_t>(d);
+                        forces[q] -= options.support_stiffness_n_per_mm * u[q];
+                        stiffness[q] += options.support_stiffness_n_per_mm;
+                    }
             Loads loads;
             loads.external_forces_n = forces;
-            if (!options.fixed_nodes.empty()) loads.constraints.push_back({"support", options.fixed_nodes, {true, true, true}, Vec3::Zero()});
+            if (!options.fixed_nodes.empty() && !elastic_support)
+                loads.constraints.push_back({"support", options.fixed_nodes, {true, true, true}, Vec3::Zero()});
             integrator.set_loads(std::move(loads));
             integrator.set_external_stiffness(stiffness);
             previous = u;
@@ -158,18 +173,28 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
 }
 
 RigidSurfaceResult register_surface_rigid(const std::vector<double>& rest, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
-                                          const MatchingOptions& matching, bool use_labels, int max_iterations, double tolerance_mm)
+                                          const MatchingOptions& matching, bool use_labels, const RigidIcpSettings& settings)
 {
     const auto start = std::chrono::steady_clock::now();
+    const int max_iterations = settings.max_iterations;
+    const double tolerance_mm = settings.tolerance_mm;
     if (max_iterations < 1) fail("rigid surface registration: max iterations {} must be ≥ 1", max_iterations);
+    if (!(settings.anchor_weight >= 0 && std::isfinite(settings.anchor_weight)))
+        fail("rigid surface registration: anchor weight {} must be ≥ 0", settings.anchor_weight);
     const std::size_t n = rest.size();
+    for (const auto a : settings.anchors)
+        if (a < 0 || 3 * static_cast<std::size_t>(a) >= n) fail("rigid surface registration: anchor node {} is not a model node", a);
     RigidSurfaceResult result;
     result.node_used.assign(n / 3, 0);
-    std::vector<double> x = rest, next(n);
+    std::vector<double> x(n), next(n);
     std::vector<SurfacePair> pairs;
     const auto& triangles = matcher.source().triangles;
-    Mat3 rotation = Mat3::Identity();
-    Vec3 translation = Vec3::Zero();
+    Mat3 rotation = settings.initial_rotation;
+    Vec3 translation = settings.initial_translation;
+    for (std::size_t i = 0; i < n; i += 3) {
+        const Vec3 y = rotation * Vec3(rest[i], rest[i + 1], rest[i + 2]) + translation;
+        for (int d = 0; d < 3; ++d) x[i + d] = y[d];
+    }
     for (int iteration = 0; iteration < max_iterations; ++iteration) {
         pairs = use_labels ? matcher.match(x, cloud, matching, &result.matching) : match_unlabelled(x, matcher.source(), cloud, matching, &result.matching);
         if (pairs.size() < 3)
@@ -201,6 +226,21 @@ RigidSurfaceResult register_surface_rigid(const std::vector<double>& rest, const
                 b += point_weight * row * gap[d];
             }
         }
+        // Supports as anchors: each pulled back to its rest position (point-to-point).
+        if (!settings.anchors.empty() && settings.anchor_weight > 0) {
+            const double w = settings.anchor_weight * static_cast<double>(pairs.size()) / static_cast<double>(settings.anchors.size());
+            for (const auto node : settings.anchors) {
+                const auto q = 3 * static_cast<std::size_t>(node);
+                const Vec3 s(x[q], x[q + 1], x[q + 2]), gap = Vec3(rest[q], rest[q + 1], rest[q + 2]) - s;
+                for (int d = 0; d < 3; ++d) {
+                    const Vec3 e = Vec3::Unit(d);
+                    Eigen::Matrix<double, 6, 1> row;
+                    row << s.cross(e), e;
+                    a += w * row * row.transpose();
+                    b += w * row * gap[d];
+                }
+            }
+        }
         const Eigen::Matrix<double, 6, 1> motion = a.ldlt().solve(b);
         const Vec3 omega = motion.head<3>();
         const Mat3 step = omega.norm() > 0 ? Mat3(Eigen::AngleAxisd(omega.norm(), omega.normalized())) : Mat3::Identity();
@@ -227,6 +267,139 @@ RigidSurfaceResult register_surface_rigid(const std::vector<double>& rest, const
     mark_used(pairs, matcher.source(), result.node_used);
     result.seconds = seconds_since(start);
     return result;
+}
+
+RigidMotion implied_rigid_motion(const std::vector<double>& rest, const std::vector<double>& u)
+{
+    if (rest.size() != u.size() || rest.size() % 3 != 0 || rest.empty())
+        fail("implied rigid motion: {} rest coordinates and {} displacement components", rest.size(), u.size());
+    const auto nodes = static_cast<Eigen::Index>(rest.size() / 3);
+    Eigen::Matrix3Xd from(3, nodes), to(3, nodes);
+    for (Eigen::Index i = 0; i < nodes; ++i)
+        for (int d = 0; d < 3; ++d) {
+            from(d, i) = rest[static_cast<std::size_t>(3 * i + d)];
+            to(d, i) = from(d, i) + u[static_cast<std::size_t>(3 * i + d)];
+        }
+    const Eigen::Matrix4d t = Eigen::umeyama(from, to, false);
+    RigidMotion m;
+    m.rotation = t.topLeftCorner<3, 3>();
+    m.translation = t.topRightCorner<3, 1>();
+    m.angle_deg = Eigen::AngleAxisd(m.rotation).angle() * 180.0 / M_PI;
+    const Eigen::Matrix3Xd rest_of = to - ((m.rotation * from).colwise() + m.translation);
+    m.residual_rms_mm = std::sqrt(rest_of.colwise().squaredNorm().mean());
+    return m;
+}
+
+namespace {
+struct Frame {
+    Vec3 centre = Vec3::Zero();
+    Mat3 axes = Mat3::Identity(); ///< columns: principal directions, largest spread first, right-handed
+};
+Frame principal_frame(const std::vector<Vec3>& points)
+{
+    Frame f;
+    for (const auto& p : points) f.centre += p / static_cast<double>(points.size());
+    Mat3 c = Mat3::Zero();
+    for (const auto& p : points) c += (p - f.centre) * (p - f.centre).transpose();
+    Eigen::SelfAdjointEigenSolver<Mat3> eigen(c);
+    for (int k = 0; k < 3; ++k) f.axes.col(k) = eigen.eigenvectors().col(2 - k);
+    if (f.axes.determinant() < 0) f.axes.col(2) *= -1.0;
+    return f;
+}
+SurfaceMesh posed_surface(const std::vector<double>& rest, const LabelledTriangles& source, const Mat3& r, const Vec3& t)
+{
+    SurfaceMesh s;
+    s.vertices.reserve(rest.size() / 3);
+    for (std::size_t i = 0; i < rest.size(); i += 3) s.vertices.push_back(r * Vec3(rest[i], rest[i + 1], rest[i + 2]) + t);
+    s.triangles = source.triangles;
+    return s;
+}
+double rotation_between_deg(const Mat3& a, const Mat3& b) { return Eigen::AngleAxisd(a.transpose() * b).angle() * 180.0 / M_PI; }
+} // namespace
+
+RobustRigidResult register_surface_rigid_robust(const std::vector<double>& rest, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
+                                                const MatchingOptions& matching, bool use_labels, const RobustRigidOptions& options)
+{
+    if (!(options.support_tolerance_mm > 0) || !(options.improvement >= 0) || !(options.start_angle_deg > 0) || !(options.anchor_weight > 0))
+        fail("robust rigid registration: support tolerance {} mm, improvement {}, start angle {}° and anchor weight {} must be > 0",
+             options.support_tolerance_mm, options.improvement, options.start_angle_deg, options.anchor_weight);
+    // Starts: identity; principal axes (cloud onto the model's surface nodes, four sign choices);
+    // ± the start angle about x, y and z (about the model's centre).
+    std::vector<std::pair<std::string, Mat3>> rotations{{"identity", Mat3::Identity()}};
+    std::vector<Vec3> surface_points;
+    {
+        std::vector<std::uint8_t> on(rest.size() / 3, 0);
+        for (const auto& tri : matcher.source().triangles)
+            for (const auto node : tri) on[static_cast<std::size_t>(node)] = 1;
+        for (std::size_t i = 0; i < on.size(); ++i)
+            if (on[i]) surface_points.emplace_back(rest[3 * i], rest[3 * i + 1], rest[3 * i + 2]);
+    }
+    const Frame model_frame = principal_frame(surface_points), cloud_frame = principal_frame(cloud.points);
+    const Vec3 centre = model_frame.centre;
+    for (int signs = 0; signs < 4; ++signs) {
+        Mat3 flip = Mat3::Identity();
+        if (signs & 1) flip(0, 0) = -1, flip(2, 2) *= -1;
+        if (signs & 2) flip(1, 1) = -1, flip(2, 2) *= -1;
+        rotations.push_back({fmt::format("principal axes {}", signs), cloud_frame.axes * flip * model_frame.axes.transpose()});
+    }
+    const double angle = options.start_angle_deg * M_PI / 180.0;
+    for (int axis = 0; axis < 3; ++axis)
+        for (const double sign : {1.0, -1.0})
+            rotations.push_back({fmt::format("{:+.0f}° about {}", sign * options.start_angle_deg, "xyz"[axis]),
+                                 Mat3(Eigen::AngleAxisd(sign * angle, Vec3::Unit(axis)))});
+
+    RobustRigidResult out;
+    for (const auto& [name, r0] : rotations) {
+        RigidIcpSettings settings;
+        settings.initial_rotation = r0;
+        // Principal-axes starts move the model's centre onto the cloud's; the others turn about it.
+        settings.initial_translation = name.rfind("principal", 0) == 0 ? Vec3(cloud_frame.centre - r0 * centre) : Vec3(centre - r0 * centre);
+        RigidCandidate c;
+        c.start = name;
+        try {
+            c.result = register_surface_rigid(rest, matcher, cloud, matching, use_labels, settings);
+        } catch (const Error& e) {
+            if (name == "identity") throw; // the plain fit failing is the caller's error
+            logger()->debug("robust rigid: start {} failed: {}", name, e.what());
+            continue;
+        }
+        c.cloud_mean_mm = points_to_surface(cloud.points, posed_surface(rest, matcher.source(), c.result.rotation, c.result.translation),
+                                            "cloud to posed model").mean_mm;
+        for (const auto node : options.supports) {
+            const auto q = 3 * static_cast<std::size_t>(node);
+            c.support_motion_mm = std::max(c.support_motion_mm, Vec3(c.result.displacement_mm[q], c.result.displacement_mm[q + 1],
+                                                                     c.result.displacement_mm[q + 2]).norm());
+        }
+        c.plausible = c.support_motion_mm <= options.support_tolerance_mm;
+        out.candidates.push_back(std::move(c));
+    }
+    const RigidCandidate& identity = out.candidates.front();
+    const RigidCandidate* best = nullptr;
+    for (const auto& c : out.candidates)
+        if (c.plausible && (!best || c.cloud_mean_mm < best->cloud_mean_mm)) best = &c;
+    // Another start must beat the plain fit clearly: a small gain does not pay for a new pose.
+    if (best && identity.plausible && best->cloud_mean_mm >= (1.0 - options.improvement) * identity.cloud_mean_mm) best = &identity;
+    if (best) {
+        out.chosen = best->result;
+        out.chosen_start = best->start;
+        out.decision = best == &identity ? "the plain fit (identity start): no other start fitted the cloud clearly better while keeping the supports"
+                                         : fmt::format("start '{}': fits the cloud {:.0f} % closer than the plain fit and keeps the supports",
+                                                       best->start, 100.0 * (1.0 - best->cloud_mean_mm / identity.cloud_mean_mm));
+        // Ambiguity: another plausible pose, as good within the margin, rotated far from this one.
+        for (const auto& c : out.candidates)
+            if (c.plausible && &c != best && c.cloud_mean_mm <= (1.0 + options.ambiguous_fit) * best->cloud_mean_mm &&
+                rotation_between_deg(c.result.rotation, best->result.rotation) > options.ambiguous_angle_deg)
+                out.pose_determined = false;
+    } else {
+        RigidIcpSettings anchored;
+        anchored.anchors = options.supports;
+        anchored.anchor_weight = options.anchor_weight;
+        out.chosen = register_surface_rigid(rest, matcher, cloud, matching, use_labels, anchored);
+        out.chosen_start = "anchored to the supports";
+        out.decision = fmt::format("no start kept every support node within {:.0f} mm: the fit was redone with the supports as anchors",
+                                   options.support_tolerance_mm);
+    }
+    return out;
 }
 
 } // namespace physreg

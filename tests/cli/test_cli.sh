@@ -254,6 +254,50 @@ expect_no_file "$work/rs_bad8"
 expect_error "register-surface: vessels without the heterogeneous model" "only the heterogeneous model" "$physreg" $rs --dataset "$ph" --visible 50 \
   --vessels "$ph/rest/vessel_centrelines.csv" -o "$work/rs_bad9"
 
+# Issue 32: the large local push (organs alone, a 30 mm sphere pressed 30 mm into the right lobe,
+# a sparse unlabelled cloud over 90 % of the surface). The default (posterior supports held) must
+# beat leaving the liver at rest; the rigid baselines must not turn it more than the truth does.
+expect_ok "phantom with the large local push" "$physreg" --log-level warn phantom --preset small --seed 2 --materials healthy --organs-only \
+  --depths 5 --no-calculix --insufflation-pa 0 --push-depth 30 --push-tool-radius 15 -o "$work/push"
+expect_ok "register-surface on the push (defaults)" "$physreg" --no-report $rs --dataset "$work/push" --state push -o "$work/rs_push"
+expect_ok "register-surface on the push, elastic supports" "$physreg" --no-report $rs --dataset "$work/push" --state push \
+  --support-stiffness 0.5 --method rigid -o "$work/rs_push_elastic"
+python3 - "$work/rs_push/summary.json" "$work/rs_push_elastic/summary.json" <<'PY' && pass || failed "register-surface on the push: never worse than at rest, honest report"
+import json, sys
+s = json.load(open(sys.argv[1]))
+m = s["methods"]
+rest = m["at_rest"]["tre"]["internal"]["mean_mm"]
+bio = m["biomechanical"]["tre"]["internal"]["mean_mm"]
+assert bio < 0.7 * rest, (bio, rest)
+truth_rotation = s["truth"]["implied_rigid_motion"]["rotation_deg"]
+for name in ("rigid", "icp"):
+    assert m[name]["implied_rigid_motion"]["rotation_deg"] <= truth_rotation + 0.5, (name, m[name]["rotation_deg"], truth_rotation)
+    assert len(m[name]["alternatives"]) >= 8 and sum(a["chosen"] for a in m[name]["alternatives"]) <= 1
+for name in m:
+    for key in ("strain_energy_mj", "largest_displacement_mm", "implied_rigid_motion", "cloud_to_model_mm"):
+        assert key in m[name], (name, key)
+assert m["biomechanical"]["strain_energy_mj"] > 0 and m["at_rest"]["strain_energy_mj"] == 0
+assert s["supports"]["kind"] == "held" and len(s["supports"]["nodes"]) == s["support_nodes"] > 0
+assert isinstance(s["determinacy"]["pose_determined"], bool) and s["determinacy"]["statement"]
+assert s["inputs"]["visible_percent"] == 90, s["inputs"]
+e = json.load(open(sys.argv[2]))
+assert e["supports"]["kind"] == "elastic" and e["supports"]["stiffness_n_per_mm"] == 0.5
+PY
+printf '# far from the liver\nname,x,y,z\nfar,900,900,900\n' > "$work/far_support.csv"
+expect_error "register-surface: support points off the model" "no surface node within --support-radius" "$physreg" $rs --dataset "$work/push" \
+  --state push --support-points "$work/far_support.csv" -o "$work/rs_bad10"
+printf 'node\n0\n99999999\n' > "$work/bad_nodes.txt"
+expect_error "register-surface: support node out of range" "is not a node of the model" "$physreg" $rs --dataset "$work/push" --state push \
+  --support-nodes "$work/bad_nodes.txt" -o "$work/rs_bad11"
+push_nodes=$(python3 -c "import json, sys; print(json.load(open(sys.argv[1]))['model']['nodes'])" "$work/rs_push/summary.json" 2>/dev/null || echo 1)
+seq 0 $((push_nodes - 1)) > "$work/all_nodes.txt"
+expect_error "register-surface: supports hold every surface node" "take every one of the" "$physreg" $rs --dataset "$work/push" --state push \
+  --support-nodes "$work/all_nodes.txt" -o "$work/rs_bad12"
+expect_error "register-surface: negative support stiffness" "--support-stiffness -1" "$physreg" $rs --dataset "$work/push" --state push \
+  --support-stiffness -1 -o "$work/rs_bad13"
+expect_error "register-surface: unknown support" "--support 'ligament'" "$physreg" $rs --dataset "$work/push" --state push --support ligament -o "$work/rs_bad14"
+for d in rs_bad10 rs_bad11 rs_bad12 rs_bad13 rs_bad14; do expect_no_file "$work/$d"; done
+
 # physreg register-images (paper 002) on the small phantom's insufflation pair: the biomechanical
 # method with label baselines, then bad inputs (each: clear message, non-zero exit, no output).
 ri="--log-level warn register-images --cycles 4 --cell-size 8"

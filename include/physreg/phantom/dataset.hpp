@@ -72,6 +72,14 @@ struct PhantomSpec {
     std::vector<double> depths_mm{20, 25, 20, 15, 22};
     ToolSpec tool;
     std::optional<double> insufflation_pa;    ///< default: 3 % of the parenchyma's Young's modulus; 0 disables
+    /// The large local push (issue 32): a sphere of `push_tool_radius_mm` pressed `push_depth_mm`
+    /// (posterior) into one lobe of the organs-alone model (held where the insufflation's is), seen
+    /// as a sparse cloud of `push_cloud_points` unlabelled points over the surface outside the tool
+    /// and the posterior `1 − push_cloud_coverage` of it. 0: no push state (the default).
+    double push_depth_mm = 0.0;
+    double push_tool_radius_mm = 12.5;
+    int push_cloud_points = 500;
+    double push_cloud_coverage = 0.9;
     double landmark_noise_mm = 0.5;
     double surface_noise_mm = 0.5;
     std::vector<int> surface_percentages{50, 40, 30, 20, 10};
@@ -83,8 +91,8 @@ struct PhantomSpec {
 
 /// What `physreg phantom` wrote: every path relative to the dataset folder.
 struct DatasetState {
-    std::string name;                              ///< "rest", "A"…"E", "insufflation"
-    std::string kind;                              ///< rest, compression, insufflation
+    std::string name;                              ///< "rest", "A"…"E", "insufflation", "push"
+    std::string kind;                              ///< rest, compression, insufflation, push
     std::map<std::string, std::string> files;      ///< role → relative path (labels, intensity, …)
     std::map<int, std::pair<std::string, std::string>> surfaces; ///< percentage → (PLY, CSV)
     double max_displacement_mm = 0.0;

@@ -45,6 +45,17 @@ LabelledPointCloud visible_surface_patch(const VolumeMesh& mesh, const std::vect
                                          const BoundarySurface& boundary, double fraction, const Vec3& view,
                                          double noise_mm, std::uint64_t seed);
 
+/// A sparse cloud over most of the surface (issue 32's large-push case): the deformed boundary
+/// without the triangles whose centroid `hidden` (e.g. under the tool) and without the most
+/// posterior-facing ones (deformed normal · +y largest: the back, against the supports) until
+/// `coverage` of the area is left; `count` points drawn area-weighted on what is left, with
+/// Gaussian noise `noise_mm`, unlabelled (0), normals of their triangles. `covered` (optional)
+/// gets the fraction of the area the cloud spans. Throws Error for coverage outside (0, 1] or
+/// count < 3.
+LabelledPointCloud sparse_surface_cloud(const VolumeMesh& mesh, const std::vector<double>& displacement_mm, const BoundarySurface& boundary,
+                                        double coverage, int count, const std::function<bool(const Vec3&)>& hidden, double noise_mm,
+                                        std::uint64_t seed, double* covered = nullptr);
+
 /// PLY (ascii: x y z nx ny nz label) and CSV (x_mm,y_mm,z_mm,label) writers, atomic.
 void write_point_cloud_ply(const std::filesystem::path& path, const LabelledPointCloud& cloud);
 void write_point_cloud_csv(const std::filesystem::path& path, const LabelledPointCloud& cloud);

@@ -51,6 +51,10 @@ LabelledTriangles regions_from_seeds(const VolumeMesh& mesh, const LabelledTrian
 /// the support `register-surface --support posterior` holds.
 std::vector<std::int32_t> surface_nodes_facing(const VolumeMesh& mesh, const LabelledTriangles& surface, const Vec3& direction, double cosine);
 
+/// Boundary nodes within `radius_mm` of any of `points` (a support picked as points: ligaments, the
+/// vena cava). Throws Error for a radius ≤ 0.
+std::vector<std::int32_t> surface_nodes_near(const VolumeMesh& mesh, const LabelledTriangles& surface, const std::vector<Vec3>& points, double radius_mm);
+
 /// The boundary of a tetrahedral mesh, every triangle "surface" (0).
 LabelledTriangles unlabelled_boundary(const VolumeMesh& mesh);
 

@@ -39,6 +39,9 @@ struct SurfaceRegistrationOptions {
     std::vector<const AuxiliaryElements*> structures;
     /// Nodes held at rest (anatomical support, e.g. the posterior surface); empty: none, as paper 001.
     std::vector<std::int32_t> fixed_nodes;
+    /// 0: `fixed_nodes` held (Dirichlet); > 0: each tied to its rest position by a spring of this
+    /// stiffness per direction (N/mm), because ligaments stretch.
+    double support_stiffness_n_per_mm = 0.0;
     void validate() const;
     /// Δt 0.1 s, Rayleigh mass and stiffness coefficients 0.1 (paper 001), lumped mass, stale tangent.
     static BackwardEulerOptions paper001_dynamics();
@@ -93,10 +96,67 @@ struct RigidSurfaceResult {
     double seconds = 0.0;
 };
 
+/// Where an ICP run starts and what else it must honour.
+struct RigidIcpSettings {
+    int max_iterations = 200;
+    double tolerance_mm = 1e-4;
+    Mat3 initial_rotation = Mat3::Identity(); ///< start x ↦ R₀ x + t₀
+    Vec3 initial_translation = Vec3::Zero();
+    /// Nodes pulled towards their rest positions (point-to-point, total weight `anchor_weight` × the
+    /// number of cloud pairs): the supports, so the pose stays one the anatomy allows.
+    std::vector<std::int32_t> anchors;
+    double anchor_weight = 0.0;
+};
+
 /// Iterative closest point (point-to-plane): labelled pairs (`use_labels`, the rigid counterpart of the biomechanical
 /// method) or pairs with any triangle (plain ICP); stops when no node moves more than `tolerance_mm`
 /// between iterations or after `max_iterations`.
 RigidSurfaceResult register_surface_rigid(const std::vector<double>& rest_positions_mm, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
-                                          const MatchingOptions& matching, bool use_labels, int max_iterations = 200, double tolerance_mm = 1e-4);
+                                          const MatchingOptions& matching, bool use_labels, const RigidIcpSettings& settings = {});
+
+/// The rigid motion nearest (least squares over the nodes, Umeyama) to a displacement field: the pose
+/// a registration implies, whatever it did besides.
+struct RigidMotion {
+    Mat3 rotation = Mat3::Identity();
+    Vec3 translation = Vec3::Zero();
+    double angle_deg = 0.0;
+    double residual_rms_mm = 0.0; ///< the non-rigid rest
+};
+RigidMotion implied_rigid_motion(const std::vector<double>& rest_positions_mm, const std::vector<double>& displacement_mm);
+
+/// Issue 32: rigid registration that does not trust one fit. ICP runs from several starts — the
+/// identity, the principal axes of the cloud matched to those of the model's surface (all four
+/// right-handed sign choices), and ±`start_angle_deg` about each axis — and a pose is kept only
+/// when it is plausible (no support node moves farther than `support_tolerance_mm`) and fits the
+/// cloud better than the identity start's by more than `improvement` (relative mean cloud-to-model
+/// distance). When no start is plausible, the fit is redone with the supports as anchors.
+struct RobustRigidOptions {
+    std::vector<std::int32_t> supports;
+    double support_tolerance_mm = 10.0;
+    double improvement = 0.1;
+    double start_angle_deg = 30.0;
+    double anchor_weight = 1.0;
+    /// Two plausible poses whose fits differ by less than this (relative) while they rotate more
+    /// than `ambiguous_angle_deg` apart: the data do not determine the pose.
+    double ambiguous_fit = 0.1;
+    double ambiguous_angle_deg = 10.0;
+};
+struct RigidCandidate {
+    std::string start;
+    RigidSurfaceResult result;
+    double cloud_mean_mm = 0.0;     ///< mean distance of every cloud point to the posed surface
+    double support_motion_mm = 0.0; ///< largest motion of a support node
+    bool plausible = true;
+};
+struct RobustRigidResult {
+    RigidSurfaceResult chosen;
+    std::string chosen_start;       ///< a candidate's start, or "anchored to the supports"
+    std::vector<RigidCandidate> candidates;
+    bool pose_determined = true;
+    std::string decision;           ///< why this pose, in words
+};
+RobustRigidResult register_surface_rigid_robust(const std::vector<double>& rest_positions_mm, const SurfaceMatcher& matcher,
+                                                const LabelledPointCloud& cloud, const MatchingOptions& matching, bool use_labels,
+                                                const RobustRigidOptions& options);
 
 } // namespace physreg

@@ -349,3 +349,37 @@ TEST(ImageWarping, InverseMapOfAnAffineDeformationIsExact)
 
 } // namespace
 } // namespace physreg
+
+namespace physreg {
+
+TEST(PartialSurface, SparseCloudCoversTheSurfaceButItsBackAndWhatIsHidden)
+{
+    // A 40 × 20 × 20 mm block of hexahedra (label 1): its boundary, a "tool" hiding x < 8 mm.
+    const VolumeMesh mesh = test::block_mesh(8, 4, 4, 5.0);
+    const BoundarySurface boundary = liver_boundary(mesh, [](std::int32_t l) { return l != 0; }, std::nullopt);
+    const std::vector<double> u(3 * mesh.node_count(), 0.0);
+    double covered = 0.0;
+    const auto hidden = [](const Vec3& x) { return x.x() < 8.0; };
+    const LabelledPointCloud cloud = sparse_surface_cloud(mesh, u, boundary, 0.55, 400, hidden, 0.0, 7, &covered);
+    ASSERT_EQ(cloud.points.size(), 400u);
+    // Total area 4 (40·20) + 2 (20·20) = 4000 mm²; hidden: the x = 0 face and 5–10 mm strips of four
+    // faces (≈ 1000 mm²); then the back (≈ 650 mm² left of the y = 20 face) is dropped first.
+    EXPECT_GT(covered, 0.5);
+    EXPECT_LE(covered, 0.55 + 1e-9);
+    int back = 0;
+    for (std::size_t q = 0; q < cloud.points.size(); ++q) {
+        const Vec3& p = cloud.points[q];
+        EXPECT_GE(p.x(), 5.0 - 1e-9) << "a point under the hidden strip";
+        EXPECT_EQ(cloud.labels[q], feature_none);
+        EXPECT_NEAR(cloud.normals[q].norm(), 1.0, 1e-9);
+        // On the surface of the block (noise 0).
+        const double inside = std::min({p.x(), 40 - p.x(), p.y(), 20 - p.y(), p.z(), 20 - p.z()});
+        EXPECT_NEAR(inside, 0.0, 1e-9);
+        back += std::abs(p.y() - 20.0) < 1e-9;
+    }
+    EXPECT_EQ(back, 0) << "the posterior face (y = 20 mm, normal +y) goes first";
+    EXPECT_NE(test::error_message([&] { sparse_surface_cloud(mesh, u, boundary, 0.0, 400, hidden, 0.0, 7); }).find("coverage"), std::string::npos);
+    EXPECT_NE(test::error_message([&] { sparse_surface_cloud(mesh, u, boundary, 0.9, 2, hidden, 0.0, 7); }).find("at least 3"), std::string::npos);
+}
+
+} // namespace physreg

@@ -225,6 +225,56 @@ TEST(SurfaceRegistration, RigidIcpRecoversAKnownMotionFromAPartialSurface)
     EXPECT_LT(worst, 0.05) << "mm, largest node error after ICP";
 }
 
+TEST(SurfaceRegistration, ImpliedRigidMotionRecoversARotationUnderANonRigidPart)
+{
+    const SurfaceModel& model = ellipsoid_model();
+    const Mat3 r = Eigen::AngleAxisd(12.0 * std::numbers::pi / 180, Vec3(0, 0, 1)).toRotationMatrix();
+    const Vec3 t(3.0, -2.0, 1.0);
+    std::vector<double> u;
+    for (const auto& p : model.mesh.nodes) {
+        const Vec3 moved = r * p + t;
+        u.insert(u.end(), {moved[0] - p[0], moved[1] - p[1], moved[2] - p[2]});
+    }
+    const RigidMotion pure = implied_rigid_motion(positions(model.mesh), u);
+    EXPECT_NEAR(pure.angle_deg, 12.0, 1e-6);
+    EXPECT_NEAR((pure.translation - t).norm(), 0.0, 1e-6);
+    EXPECT_LT(pure.residual_rms_mm, 1e-6);
+    // A symmetric bulge (every node pushed out along x by 0.1 x) implies no rotation and leaves its RMS.
+    std::vector<double> bulge(u.size(), 0.0);
+    for (std::size_t n = 0; n < model.mesh.node_count(); ++n) bulge[3 * n] = 0.1 * (model.mesh.nodes[n].x() - 36.0);
+    const RigidMotion b = implied_rigid_motion(positions(model.mesh), bulge);
+    EXPECT_LT(b.angle_deg, 0.5);
+    EXPECT_GT(b.residual_rms_mm, 0.5);
+    EXPECT_NE(test::error_message([&] { implied_rigid_motion(positions(model.mesh), {1.0}); }).find("displacement components"), std::string::npos);
+}
+
+TEST(SurfaceRegistration, RobustRigidRefusesAPoseThatTearsTheSupportsAway)
+{
+    // The cloud: the anterior surface rotated 20° about z; the supports: the posterior nodes, which
+    // the plain fit would carry far. The robust fit must notice it and anchor the supports.
+    const SurfaceModel& model = ellipsoid_model();
+    const Vec3 centre(36, 24, 19.5);
+    const Mat3 r = Eigen::AngleAxisd(20.0 * std::numbers::pi / 180, Vec3(0, 0, 1)).toRotationMatrix();
+    const LabelledPointCloud cloud = anterior_cloud(model, [&](const Vec3& p) { return Vec3(r * (p - centre) + centre); });
+    const LabelledTriangles surface = unlabelled_boundary(model.mesh);
+    const SurfaceMatcher matcher(surface, model.mesh.node_count(), "ellipsoid");
+    MatchingOptions matching;
+    matching.distance_fraction = 1.0;
+    RobustRigidOptions free;
+    const RobustRigidResult unconstrained = register_surface_rigid_robust(positions(model.mesh), matcher, cloud, matching, true, free);
+    EXPECT_NEAR(Eigen::AngleAxisd(unconstrained.chosen.rotation).angle() * 180 / std::numbers::pi, 20.0, 0.5);
+    EXPECT_GE(unconstrained.candidates.size(), 8u) << "identity, 4 principal-axes and 6 rotated starts";
+    RobustRigidOptions held = free;
+    held.supports = surface_nodes_facing(model.mesh, surface, Vec3::UnitY(), 0.5);
+    held.support_tolerance_mm = 3.0; // the 20° turn carries posterior nodes 5–8 mm
+    ASSERT_FALSE(held.supports.empty());
+    const RobustRigidResult anchored = register_surface_rigid_robust(positions(model.mesh), matcher, cloud, matching, true, held);
+    EXPECT_EQ(anchored.chosen_start, "anchored to the supports");
+    EXPECT_LT(Eigen::AngleAxisd(anchored.chosen.rotation).angle() * 180 / std::numbers::pi, 15.0);
+    for (const auto& c : anchored.candidates)
+        if (c.plausible) EXPECT_LE(c.support_motion_mm, held.support_tolerance_mm);
+}
+
 namespace {
 struct HiddenError {
     double registered_mm = 0.0, at_rest_mm = 0.0, fit_mm = 0.0;
