@@ -83,7 +83,9 @@ for case in cases:
     summary = json.load(open(os.path.join(out, "summary.json")))
     for method in METHODS:
         m = summary["methods"].get(method)
-        if m is None:
+        if m is None or m.get("status") == "failed":
+            if m is not None:
+                print(f"{case['name']}: {method} failed: {m.get('reason')}", file=sys.stderr)
             continue
         dice = m["dice"]
         rows.append({"case": case["name"], "method": method, "max_truth_displacement_mm": state.get("max_displacement_mm"),

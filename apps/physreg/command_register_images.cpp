@@ -8,6 +8,7 @@
 
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
+#include "physreg/core/interrupt.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/evaluation/segmentation_overlap.hpp"
 #include "physreg/evaluation/tre.hpp"
@@ -380,6 +381,7 @@ void add_subcommand_register_images_impl(CLI::App& app)
         if (o->baselines == "all" || o->baselines == "intensity") inputs.emplace_back("intensity", false);
         if (o->baselines == "all" || o->baselines == "labels") inputs.emplace_back("labels", true);
         const int total = 3 * static_cast<int>(inputs.size());
+        std::map<std::string, std::string> failed_baselines; ///< name → reason
         int done = 0;
         for (const auto& [input, labels_mode] : inputs) {
             // Rigid and B-spline see the whole moving image, so that a sample pushed out of the region
@@ -391,7 +393,20 @@ void add_subcommand_register_images_impl(CLI::App& app)
                                                      : resample_image(in.moving, zero_field(roi), 0.0f);
             for (const BaselineMethod method : {BaselineMethod::rigid, BaselineMethod::demons, BaselineMethod::bspline}) {
                 bar.update(0.5 + 0.4 * done / std::max(1, total), fmt::format("{} ({})", to_string(method), input));
-                BaselineResult r = register_baseline(f, method == BaselineMethod::demons ? m_region : m_whole, method, labels_mode, baseline);
+                BaselineResult r;
+                try {
+                    r = register_baseline(f, method == BaselineMethod::demons ? m_region : m_whole, method, labels_mode, baseline);
+                } catch (const Interrupted&) {
+                    throw;
+                } catch (const Error& e) {
+                    // A baseline that fails is a finding of the report, not the end of the command
+                    // (issue 28: B-spline found no fixed sample in an unaligned pair).
+                    const std::string name = to_string(method) + "_" + input;
+                    logger()->warn("register-images: baseline {} failed: {}", name, e.what());
+                    failed_baselines[name] = e.what();
+                    ++done;
+                    continue;
+                }
                 MethodOutcome out{to_string(method) + "_" + input, std::move(r.fixed_to_moving), std::nullopt, r.seconds, json(r.figures), {}};
                 if (in.landmarks_moving) {
                     LandmarkSet mapped = *in.landmarks_moving;
@@ -425,7 +440,14 @@ void add_subcommand_register_images_impl(CLI::App& app)
             r["dice"] = dice;
             r["surface_distance"] = surface;
             if (m.landmarks && in.landmarks_fixed) r["tre"] = tre_json(compute_tre(*m.landmarks, *in.landmarks_fixed, m.name + " landmarks"));
+            r["status"] = "ok";
             methods[m.name] = r;
+        }
+        for (const auto& [name, reason] : failed_baselines) {
+            methods[name] = {{"status", "failed"}, {"reason", reason}};
+            if (name == o->method || name == o->method + "_intensity" || name == o->method + "_labels")
+                if (std::none_of(outcomes.begin(), outcomes.end(), [&](const MethodOutcome& m) { return m.name.rfind(o->method + "_", 0) == 0; }))
+                    fail("register-images: the chosen --method {} failed: {}", o->method, reason);
         }
         // The written result: the chosen method (baselines: on intensities when run, else labels).
         const MethodOutcome* chosen = nullptr;
@@ -502,6 +524,7 @@ void add_subcommand_register_images_impl(CLI::App& app)
             line += fmt::format(", mean Dice {:.3f}, {:.1f} s", dice / std::max<std::size_t>(1, r["dice"].size()), m.seconds);
             std::cerr << line << "\n";
         }
+        for (const auto& [name, reason] : failed_baselines) std::cerr << fmt::format("{:<20} failed: {}\n", name, reason);
     });
 }
 

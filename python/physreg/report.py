@@ -126,6 +126,9 @@ def methods_table(summary):
         names = sorted(methods, key=lambda m: (METHOD_ORDER.index(m) if m in METHOD_ORDER else 99, m))
         for name in names:
             m = methods[name]
+            if m.get("status") == "failed":  # a baseline that failed: said, not hidden
+                rows.append((f"{name} — failed: {m.get('reason', '')}", None, {}))
+                continue
             extra = {"seconds": m.get("seconds")}
             if "hausdorff_mm" in m:
                 extra["hausdorff_mean_mm"] = m["hausdorff_mm"].get("mean")

@@ -383,6 +383,29 @@ expect_error "register-images: empty structure" "structure 9 is empty in both" \
   "$physreg" $ri --dataset "$ph" --structures 2,9 -o "$work/ri_bad6"
 expect_error "register-images: unknown method" "--method 'affine'" "$physreg" $ri --dataset "$ph" --method affine -o "$work/ri_bad7"
 
+# A baseline that fails (issue 28 item 2: frames 1000 mm apart, so ITK's rigid and B-spline find no
+# overlap) is reported as failed in summary.json; only the chosen method failing fails the command.
+python3 - "$ph/states/insufflation" "$work" <<'PY'
+import gzip, struct, sys
+for name in ("labels", "intensity"):
+    d = bytearray(gzip.open(f"{sys.argv[1]}/{name}.nii.gz").read())
+    for offset in (268, 292):  # NIfTI-1 qoffset_x and srow_x[3]: the origin's x, moved 1000 mm
+        struct.pack_into("<f", d, offset, struct.unpack_from("<f", d, offset)[0] + 1000.0)
+    gzip.open(f"{sys.argv[2]}/far_{name}.nii.gz", "wb").write(bytes(d))
+PY
+far="--fixed $work/far_intensity.nii.gz --fixed-labels $work/far_labels.nii.gz --moving $ph/rest/intensity.nii.gz --moving-labels $ph/rest/labels.nii.gz"
+expect_ok "register-images: failing baselines do not fail the command" "$physreg" --no-report --log-level warn register-images --cycles 2 --cell-size 8 \
+  --baselines labels $far -o "$work/ri_far"
+python3 - "$work/ri_far/summary.json" <<'PY' && pass || failed "register-images: failed baselines reported with a reason"
+import json, sys
+m = json.load(open(sys.argv[1]))["methods"]
+assert m["rigid_labels"]["status"] == "failed" and "do not overlap" in m["rigid_labels"]["reason"], m["rigid_labels"]
+assert m["biomechanical"]["status"] == "ok" and "dice" in m["biomechanical"]
+PY
+expect_error "register-images: the chosen method failing is an error" "the chosen --method rigid failed" "$physreg" --log-level warn register-images \
+  --cycles 2 --cell-size 8 --baselines labels --method rigid $far -o "$work/ri_far_rigid"
+expect_no_file "$work/ri_far_rigid"
+
 # physreg estimate / register-compression / evaluate on the small phantom (≈ 5 mm cells).
 g="--grid 36x27x12"
 expect_ok "estimate" "$physreg" --log-level warn estimate --dataset "$ph" --train A,B --validate D $g --max-evaluations 3 \
