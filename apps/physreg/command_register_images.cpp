@@ -23,6 +23,7 @@
 #include "physreg/mesh/tetrahedral_meshing.hpp"
 #include "physreg/phantom/dataset.hpp"
 #include "physreg/registration/image_baselines.hpp"
+#include "physreg/registration/segmentation_alignment.hpp"
 #include "physreg/registration/segmentation_registration.hpp"
 #include "physreg/registration/surface_model.hpp"
 
@@ -40,6 +41,7 @@ namespace {
 struct Options : CommonOptions {
     std::string dataset, state = "insufflation", fixed, fixed_labels, moving, moving_labels, landmarks_fixed, landmarks_moving, tissues, output;
     std::string structures, method = "biomechanical", hold = "auto", hold_labels, parametrisation = "surface-displacement", baselines = "all";
+    std::string initial = "rigid";
     double cell_size = 6.0, facet_distance = 0.75, margin = 15.0, anchor = 0.0, tolerance = 1e-3, bspline_grid = 50.0, demons_sigma = 1.5;
     int iterations = 5, cycles = 40;
     bool no_moduli = false, replace = false;
@@ -145,6 +147,43 @@ Inputs load_inputs(const Options& o)
 }
 
 /// The fixed grid cropped to the structures of both segmentations plus `margin_mm`.
+/// A fixed → aligned-moving field d_a composed with T⁻¹: y ↦ T⁻¹(y + d_a(y)) − y.
+DisplacementField compose_with_alignment(DisplacementField field, const SegmentationAlignment& a)
+{
+    const auto& g = field.geometry;
+    std::size_t v = 0;
+    for (std::int64_t k = 0; k < g.size[2]; ++k)
+        for (std::int64_t j = 0; j < g.size[1]; ++j)
+            for (std::int64_t i = 0; i < g.size[0]; ++i, ++v) {
+                const Vec3 y = g.index_to_physical(Vec3(double(i), double(j), double(k)));
+                const Vec3 d(field.components[3 * v], field.components[3 * v + 1], field.components[3 * v + 2]);
+                const Vec3 x = a.rotation.transpose() * (y + d - a.translation) - y;
+                for (int c = 0; c < 3; ++c) field.components[3 * v + static_cast<std::size_t>(c)] = static_cast<float>(x[c]);
+            }
+    return field;
+}
+
+/// d(y) = T⁻¹(y) − y on `geometry`: the fixed → moving map of the rigid part alone.
+DisplacementField rigid_inverse_field(const SegmentationAlignment& a, const ImageGeometry& geometry)
+{
+    DisplacementField f = zero_field(geometry);
+    return compose_with_alignment(f, a);
+}
+
+/// The moving side seen through the initial alignment T (x_fixed = T x_moving): image and labels
+/// resampled onto the fixed grid at T⁻¹(y), landmarks moved by T. Everything after it runs in the
+/// fixed frame and explains only the non-rigid rest.
+Inputs aligned_inputs(const Inputs& in, const SegmentationAlignment& a)
+{
+    Inputs out = in;
+    const DisplacementField to_moving = rigid_inverse_field(a, in.fixed.geometry);
+    out.moving = resample_image(in.moving, to_moving, 0.0f);
+    out.moving_labels = resample_labels(in.moving_labels, to_moving);
+    if (in.landmarks_moving)
+        for (auto& l : *out.landmarks_moving) l.position = a.apply(l.position);
+    return out;
+}
+
 ImageGeometry region_of_interest(const Inputs& in, double margin_mm)
 {
     const ImageGeometry& g = in.fixed.geometry;
@@ -239,6 +278,8 @@ void add_subcommand_register_images_impl(CLI::App& app)
     cmd->add_option("--structures", o->structures, "labels to mesh and match, e.g. 2,3,4,6 (default: every label of the moving segmentation)");
     cmd->add_option("--tissues", o->tissues, "tissue table (YAML/JSON): initial E (Pa) and ν per label (default: 3 kPa, ν 0.45)");
     cmd->add_option("--method", o->method, "the method whose result is written: biomechanical, rigid, demons or bspline")->capture_default_str();
+    cmd->add_option("--initial", o->initial, "initial alignment of the segmentations before every method: identity, centroid or rigid "
+                                             "(centroids, then rigid on the fixed structures' distance maps)")->capture_default_str();
     cmd->add_option("--baselines", o->baselines, "baselines in the report: all, intensity, labels or none")->capture_default_str();
     cmd->add_option("--hold", o->hold, "Dirichlet support: posterior (surface nodes facing +y), none, or auto (posterior for datasets, else none)")->capture_default_str();
     cmd->add_option("--hold-labels", o->hold_labels, "labels (meshed with the structures) whose nodes are held, e.g. bone");
@@ -279,7 +320,35 @@ void add_subcommand_register_images_impl(CLI::App& app)
         StagedDirectory staging(o->output, o->replace);
         ProgressDisplay bar("register-images");
         bar.update(0.0, "inputs");
-        const Inputs in = load_inputs(*o);
+        const Inputs original = load_inputs(*o);
+        const InitialAlignment initial_mode = parse_initial_alignment(o->initial);
+        bar.update(0.01, "initial alignment");
+        const SegmentationAlignment alignment = align_segmentations(original.fixed_labels, original.moving_labels, original.structures, initial_mode);
+        if (initial_mode != InitialAlignment::identity)
+            logger()->info("register-images: initial alignment ({}, start {}): rotation {:.2f}°, translation ({:.1f}, {:.1f}, {:.1f}) mm; structures' "
+                           "boundary RMS distance {:.2f} → {:.2f} mm", o->initial, alignment.start, alignment.rotation_deg, alignment.translation[0],
+                           alignment.translation[1], alignment.translation[2], alignment.rms_boundary_distance_before_mm, alignment.rms_boundary_distance_mm);
+        const Inputs in = initial_mode == InitialAlignment::identity ? original : aligned_inputs(original, alignment);
+        if (initial_mode == InitialAlignment::identity) {
+            // Frames that do not overlap at all: no method here can relate them (there is no initial
+            // alignment yet), so say so before any work instead of returning an unrelated result.
+            const auto box = [](const ImageGeometry& g) {
+                Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
+                for (int corner = 0; corner < 8; ++corner) {
+                    Vec3 index;
+                    for (int a = 0; a < 3; ++a) index[a] = ((corner >> a) & 1) ? double(g.size[a]) - 0.5 : -0.5;
+                    lo = lo.cwiseMin(g.index_to_physical(index));
+                    hi = hi.cwiseMax(g.index_to_physical(index));
+                }
+                return std::pair{lo, hi};
+            };
+            const auto [flo, fhi] = box(in.fixed.geometry);
+            const auto [mlo, mhi] = box(in.moving.geometry);
+            if ((flo.array() > mhi.array()).any() || (mlo.array() > fhi.array()).any())
+                fail("register-images: the fixed and moving images do not overlap in physical space (fixed [{:.1f} {:.1f} {:.1f}]–[{:.1f} {:.1f} {:.1f}] "
+                     "mm, moving [{:.1f} {:.1f} {:.1f}]–[{:.1f} {:.1f} {:.1f}] mm); bring them into one frame first or use --initial centroid|rigid",
+                     flo[0], flo[1], flo[2], fhi[0], fhi[1], fhi[2], mlo[0], mlo[1], mlo[2], mhi[0], mhi[1], mhi[2]);
+        }
         const ImageGeometry roi = region_of_interest(in, o->margin);
         const ScalarImage fixed = crop<ScalarImage>(in.fixed, roi, in.fixed.values);
         const LabelVolume fixed_labels = crop<LabelVolume>(in.fixed_labels, roi, in.fixed_labels.labels);
@@ -425,8 +494,26 @@ void add_subcommand_register_images_impl(CLI::App& app)
             }
         }
         bar.update(0.92, "evaluation and outputs");
-        outcomes.front().warped_labels = resample_labels(in.moving_labels, outcomes.front().field);
-        if (in.landmarks_moving) outcomes.front().landmarks = *in.landmarks_moving;
+        outcomes.front().warped_labels = resample_labels(original.moving_labels, outcomes.front().field);
+        if (original.landmarks_moving) outcomes.front().landmarks = *original.landmarks_moving;
+        if (initial_mode != InitialAlignment::identity) {
+            // Every method ran after the alignment: its field is composed with T⁻¹ and the original
+            // moving labels are warped through the whole map. The alignment alone is a method too.
+            for (std::size_t k = 1; k < outcomes.size(); ++k) {
+                auto& m = outcomes[k];
+                m.field = compose_with_alignment(std::move(m.field), alignment);
+                LabelVolume warped = resample_labels(original.moving_labels, m.field);
+                if (m.name == "biomechanical") // voxels the deformed structures left stay background
+                    for (std::size_t v = 0; v < warped.labels.size(); ++v)
+                        if (m.warped_labels.labels[v] == 0 && std::count(in.structures.begin(), in.structures.end(), warped.labels[v])) warped.labels[v] = 0;
+                m.warped_labels = std::move(warped);
+            }
+            MethodOutcome rigid_part{"initial_alignment", rigid_inverse_field(alignment, roi), std::nullopt, 0.0,
+                                     json{{"mode", o->initial}, {"start", alignment.start}}, {}};
+            rigid_part.warped_labels = resample_labels(original.moving_labels, rigid_part.field);
+            if (in.landmarks_moving) rigid_part.landmarks = *in.landmarks_moving;
+            outcomes.insert(outcomes.begin() + 1, std::move(rigid_part));
+        }
         json methods;
         for (const auto& m : outcomes) {
             json r = m.details;
@@ -455,7 +542,7 @@ void add_subcommand_register_images_impl(CLI::App& app)
             if (m.name == o->method || m.name == o->method + "_intensity" || (!chosen && m.name == o->method + "_labels")) chosen = &m;
         if (!chosen) fail("register-images: method {} was not run", o->method);
         write_label_volume(staging.path() / "warped_labels.nii.gz", chosen->warped_labels);
-        write_scalar_image(staging.path() / "warped_moving.nii.gz", resample_image(in.moving, chosen->field, 0.0f));
+        write_scalar_image(staging.path() / "warped_moving.nii.gz", resample_image(original.moving, chosen->field, 0.0f));
         write_displacement_field(staging.path() / "displacement.nii.gz", chosen->field);
         if (chosen->landmarks) write_landmarks(staging.path() / "landmarks.csv", *chosen->landmarks);
         MeshData data;
@@ -504,6 +591,15 @@ void add_subcommand_register_images_impl(CLI::App& app)
                                  {"bspline_grid_mm", o->bspline_grid}, {"demons_sigma_voxels", o->demons_sigma}};
         summary["estimated_moduli_pa"] = json::object();
         for (std::size_t j = 0; j < model_labels.size(); ++j) summary["estimated_moduli_pa"][std::to_string(model_labels[j])] = b.young_moduli_pa[j];
+        summary["initial_alignment"] = {{"mode", o->initial}, {"start", alignment.start}, {"rotation_deg", alignment.rotation_deg},
+                                        {"translation_mm", {alignment.translation[0], alignment.translation[1], alignment.translation[2]}},
+                                        {"rotation_matrix", {{alignment.rotation(0, 0), alignment.rotation(0, 1), alignment.rotation(0, 2)},
+                                                             {alignment.rotation(1, 0), alignment.rotation(1, 1), alignment.rotation(1, 2)},
+                                                             {alignment.rotation(2, 0), alignment.rotation(2, 1), alignment.rotation(2, 2)}}},
+                                        {"convention", "x_fixed = R x_moving + t; every method's field includes it"},
+                                        {"centroid_distance_before_mm", alignment.centroid_distance_mm},
+                                        {"boundary_rms_distance_mm", {{"before", alignment.rms_boundary_distance_before_mm}, {"after", alignment.rms_boundary_distance_mm}}},
+                                        {"mesh_frame", initial_mode == InitialAlignment::identity ? "moving" : "fixed, after the initial alignment (mesh.vtu displacement: the non-rigid part)"}};
         summary["methods"] = methods;
         summary["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         write_atomically(staging.path() / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });

@@ -366,8 +366,8 @@ expect_error "register-images: organ sets differ" "is in the fixed segmentation 
 expect_no_file "$work/ri_bad2"
 edit_nifti "$st/labels.nii.gz" "$work/fixed_far_labels.nii.gz" shift:5000
 edit_nifti "$st/intensity.nii.gz" "$work/fixed_far.nii.gz" shift:5000
-expect_error "register-images: images without overlap" "do not overlap" \
-  "$physreg" $ri --fixed "$work/fixed_far.nii.gz" --fixed-labels "$work/fixed_far_labels.nii.gz" --moving "$rest/intensity.nii.gz" \
+expect_error "register-images: images without overlap (--initial identity)" "do not overlap" \
+  "$physreg" $ri --initial identity --fixed "$work/fixed_far.nii.gz" --fixed-labels "$work/fixed_far_labels.nii.gz" --moving "$rest/intensity.nii.gz" \
   --moving-labels "$rest/labels.nii.gz" --structures 2,3,4,6 --anchor 0.01 -o "$work/ri_bad3"
 expect_no_file "$work/ri_bad3"
 # The surface-displacement unknowns hold the whole boundary; nodal forces alone need a support.
@@ -383,28 +383,47 @@ expect_error "register-images: empty structure" "structure 9 is empty in both" \
   "$physreg" $ri --dataset "$ph" --structures 2,9 -o "$work/ri_bad6"
 expect_error "register-images: unknown method" "--method 'affine'" "$physreg" $ri --dataset "$ph" --method affine -o "$work/ri_bad7"
 
-# A baseline that fails (issue 28 item 2: frames 1000 mm apart, so ITK's rigid and B-spline find no
-# overlap) is reported as failed in summary.json; only the chosen method failing fails the command.
+# A baseline that fails (issue 28 item 2: the fixed frame moved 284 mm, so the images overlap by a
+# sliver and ITK's B-spline finds no fixed sample inside the moving image) is reported as failed in
+# summary.json; only the chosen method failing fails the command.
 python3 - "$ph/states/insufflation" "$work" <<'PY'
 import gzip, struct, sys
 for name in ("labels", "intensity"):
     d = bytearray(gzip.open(f"{sys.argv[1]}/{name}.nii.gz").read())
-    for offset in (268, 292):  # NIfTI-1 qoffset_x and srow_x[3]: the origin's x, moved 1000 mm
-        struct.pack_into("<f", d, offset, struct.unpack_from("<f", d, offset)[0] + 1000.0)
+    for offset in (268, 292):  # NIfTI-1 qoffset_x and srow_x[3]: the origin's x
+        struct.pack_into("<f", d, offset, struct.unpack_from("<f", d, offset)[0] + 284.0)
     gzip.open(f"{sys.argv[2]}/far_{name}.nii.gz", "wb").write(bytes(d))
 PY
 far="--fixed $work/far_intensity.nii.gz --fixed-labels $work/far_labels.nii.gz --moving $ph/rest/intensity.nii.gz --moving-labels $ph/rest/labels.nii.gz"
-expect_ok "register-images: failing baselines do not fail the command" "$physreg" --no-report --log-level warn register-images --cycles 2 --cell-size 8 \
-  --baselines labels $far -o "$work/ri_far"
+expect_ok "register-images: a failing baseline does not fail the command" "$physreg" --no-report --log-level warn register-images --cycles 2 \
+  --cell-size 8 --baselines labels --initial identity $far -o "$work/ri_far"
 python3 - "$work/ri_far/summary.json" <<'PY' && pass || failed "register-images: failed baselines reported with a reason"
 import json, sys
 m = json.load(open(sys.argv[1]))["methods"]
-assert m["rigid_labels"]["status"] == "failed" and "do not overlap" in m["rigid_labels"]["reason"], m["rigid_labels"]
+assert m["bspline_labels"]["status"] == "failed" and "no fixed sample" in m["bspline_labels"]["reason"], m["bspline_labels"]
 assert m["biomechanical"]["status"] == "ok" and "dice" in m["biomechanical"]
 PY
-expect_error "register-images: the chosen method failing is an error" "the chosen --method rigid failed" "$physreg" --log-level warn register-images \
-  --cycles 2 --cell-size 8 --baselines labels --method rigid $far -o "$work/ri_far_rigid"
-expect_no_file "$work/ri_far_rigid"
+expect_error "register-images: the chosen method failing is an error" "the chosen --method bspline failed" "$physreg" --log-level warn register-images \
+  --cycles 2 --cell-size 8 --baselines labels --initial identity --method bspline $far -o "$work/ri_far_bspline"
+expect_no_file "$work/ri_far_bspline"
+# Issue 28 item 1: the same pair with the default initial alignment (rigid on the segmentations)
+# is brought back into one frame before every method.
+expect_ok "register-images: initial rigid alignment of frames 284 mm apart" "$physreg" --no-report --log-level warn register-images --cycles 2 \
+  --cell-size 8 --baselines labels --structures 2,3,4,6 $far -o "$work/ri_aligned"
+python3 - "$work/ri_aligned/summary.json" <<'PY' && pass || failed "register-images: the initial alignment finds the 284 mm shift and every method gains from it"
+import json, sys
+s = json.load(open(sys.argv[1]))
+a = s["initial_alignment"]
+assert a["mode"] == "rigid" and abs(a["translation_mm"][0] + 284.0) < 2.0 and abs(a["translation_mm"][1]) < 2 and a["rotation_deg"] < 1.0, a
+assert a["boundary_rms_distance_mm"]["after"] < 0.2 * a["boundary_rms_distance_mm"]["before"], a
+m = s["methods"]
+dice = lambda name: sum(m[name]["dice"].values()) / len(m[name]["dice"])
+assert dice("at_rest") < 0.1, dice("at_rest")
+for name in ("initial_alignment", "biomechanical", "rigid_labels", "demons_labels", "bspline_labels"):
+    assert m[name]["status"] == "ok" and dice(name) > 0.9, (name, dice(name))
+PY
+expect_error "register-images: unknown initial alignment" "--initial 'affine'" "$physreg" $ri --dataset "$ph" --initial affine -o "$work/ri_bad_initial"
+expect_no_file "$work/ri_bad_initial"
 
 # physreg estimate / register-compression / evaluate on the small phantom (≈ 5 mm cells).
 g="--grid 36x27x12"

@@ -368,3 +368,50 @@ INSTANTIATE_TEST_SUITE_P(SegmentationRegistration, Alternation,
 
 } // namespace
 } // namespace physreg
+
+#include "physreg/registration/segmentation_alignment.hpp"
+
+namespace physreg {
+
+namespace {
+// An ellipsoid "gland" (semi-axes 24, 16, 12 mm) with an off-centre "lesion" (r 6 mm), seen through
+// x ↦ R x + t (so the fixed labels are the moving ones moved by that rigid motion), 1.5 mm voxels.
+LabelVolume gland(const Mat3& r, const Vec3& t)
+{
+    const Vec3 centre(45, 36, 30);
+    return test::make_volume({60, 48, 40}, [&](int i, int j, int k) {
+        const Vec3 y = 1.5 * Vec3(i + 0.5, j + 0.5, k + 0.5);
+        const Vec3 x = r.transpose() * (y - t - centre); // the moving point seen at y
+        if ((x - Vec3(8, 4, 2)).norm() < 6.0) return std::uint16_t(2);
+        return std::uint16_t(std::pow(x[0] / 24, 2) + std::pow(x[1] / 16, 2) + std::pow(x[2] / 12, 2) < 1 ? 1 : 0);
+    }, Vec3::Constant(1.5), Vec3::Zero());
+}
+} // namespace
+
+TEST(SegmentationAlignment, RecoversARigidMotionBetweenFramesAndNamesAnEmptyStructure)
+{
+    const Vec3 centre(45, 36, 30);
+    const Mat3 r = Eigen::AngleAxisd(12.0 * M_PI / 180, Vec3(0.3, 0.2, 1).normalized()).toRotationMatrix();
+    const Vec3 shift(9.0, -6.0, 4.0);
+    const LabelVolume moving = gland(Mat3::Identity(), Vec3::Zero());
+    const LabelVolume fixed = gland(r, shift);
+    // x_fixed = R (x − c) + c + shift = R x + (c − R c + shift).
+    const Vec3 t = centre - r * centre + shift;
+    const SegmentationAlignment centroid = align_segmentations(fixed, moving, {1, 2}, InitialAlignment::centroid);
+    EXPECT_LT(centroid.rotation_deg, 1e-9);
+    EXPECT_LT(centroid.rms_boundary_distance_mm, centroid.rms_boundary_distance_before_mm);
+    const SegmentationAlignment rigid = align_segmentations(fixed, moving, {1, 2}, InitialAlignment::rigid);
+    EXPECT_NEAR(rigid.rotation_deg, 12.0, 1.0);
+    double worst = 0.0;
+    for (const Vec3& x : {Vec3(45, 36, 30), Vec3(69, 36, 30), Vec3(45, 52, 30), Vec3(45, 36, 42)})
+        worst = std::max(worst, (rigid.apply(x) - (r * x + t)).norm());
+    EXPECT_LT(worst, 1.0) << "mm, at the gland's centre and its semi-axes' tips (voxels 1.5 mm)";
+    EXPECT_LT(rigid.rms_boundary_distance_mm, 0.5 * centroid.rms_boundary_distance_mm);
+    const SegmentationAlignment none = align_segmentations(fixed, moving, {1, 2}, InitialAlignment::identity);
+    EXPECT_EQ(none.translation, Vec3::Zero());
+    EXPECT_NE(test::error_message([&] { align_segmentations(fixed, moving, {1, 3}, InitialAlignment::rigid); }).find("structure 3 is empty"),
+              std::string::npos);
+    EXPECT_NE(test::error_message([&] { parse_initial_alignment("affine"); }).find("--initial 'affine'"), std::string::npos);
+}
+
+} // namespace physreg
