@@ -39,7 +39,7 @@ namespace {
 struct Options : CommonOptions {
     std::string dataset, state = "insufflation", labels, surface, region_seeds, model, regions, cloud, landmarks, landmarks_truth, truth_surface, output;
     std::string liver_labels, method = "biomechanical", material = "healthy", support = "posterior", model_kind = "homogeneous";
-    std::string support_points, support_nodes;
+    std::string support_points, support_nodes, support_region;
     double support_radius = 10.0, support_stiffness = 0.0, support_tolerance = 3.0;
     double capsule_thickness = MembraneMaterial{}.thickness_mm, vessel_scale = 1.0, vessel_radius = 1.5, region_radius = 15.0, surface_scale = 1.0;
     std::string vessels;
@@ -252,6 +252,17 @@ Supports select_supports(const Options& o, const Inputs& in)
         s.nodes.insert(s.nodes.end(), nodes.begin(), nodes.end());
         s.sources.push_back({{"source", o.support_points}, {"points", points.size()}, {"radius_mm", o.support_radius}, {"nodes", nodes.size()}});
     }
+    if (!o.support_region.empty()) {
+        // A labelled surface region (from --regions or --region-seeds): e.g. 3 = the bare area.
+        std::set<std::int32_t> wanted;
+        for (const double v : parse_number_list(o.support_region, "--support-region")) wanted.insert(to_integer<std::int32_t>(v, "--support-region", "a region label"));
+        std::set<std::int32_t> nodes;
+        for (std::size_t t = 0; t < in.surface.triangles.size(); ++t)
+            if (wanted.count(in.surface.labels[t])) nodes.insert(in.surface.triangles[t].begin(), in.surface.triangles[t].end());
+        if (nodes.empty()) fail("--support-region {}: no surface triangle of the model carries that region label (give them with --regions)", o.support_region);
+        s.nodes.insert(s.nodes.end(), nodes.begin(), nodes.end());
+        s.sources.push_back({{"source", "region " + o.support_region}, {"nodes", nodes.size()}});
+    }
     if (!o.support_nodes.empty()) {
         const auto nodes = read_node_ids(o.support_nodes, in.mesh.node_count());
         s.nodes.insert(s.nodes.end(), nodes.begin(), nodes.end());
@@ -265,7 +276,8 @@ Supports select_supports(const Options& o, const Inputs& in)
     for (const auto n : s.nodes) on_surface += surface_nodes.count(n);
     if (!s.nodes.empty() && on_surface >= surface_nodes.size())
         fail("--support {}{}: the supports take every one of the {} surface nodes; nothing is left free to meet the cloud", o.support,
-             o.support_points.empty() && o.support_nodes.empty() ? "" : " with --support-points/--support-nodes", surface_nodes.size());
+             o.support_points.empty() && o.support_nodes.empty() && o.support_region.empty() ? "" : " with --support-points/--support-nodes/--support-region",
+             surface_nodes.size());
     if (!s.nodes.empty())
         logger()->info("register-surface: {} support nodes {}", s.nodes.size(),
                        o.support_stiffness > 0 ? fmt::format("on springs of {} N/mm", o.support_stiffness) : std::string("held at rest"));
@@ -407,6 +419,8 @@ void add_subcommand_register_surface(CLI::App& app)
     sub->add_option("--support-points", o->support_points, "Further support: surface nodes within --support-radius of these points (landmark "
                                                            "file: CSV, .fcsv, .mrk.json; e.g. ligaments, vena cava)");
     sub->add_option("--support-radius", o->support_radius, "--support-points: radius, mm (default 10)");
+    sub->add_option("--support-region", o->support_region, "Further support: surface triangles of these region labels (e.g. 3; from "
+                                                           "--regions, whose labels other than 0, 1, 2 are never paired with the cloud)");
     sub->add_option("--support-nodes", o->support_nodes, "Further support: a file of model node ids (one or more per line, '#' comments)");
     sub->add_option("--support-stiffness", o->support_stiffness, "0 (default): supports held; > 0: springs of this stiffness, N/mm per node "
                                                                  "and direction, to the rest position (ligaments stretch)");

@@ -57,7 +57,9 @@ def test_register_surface_reports_tre_and_hausdorff(dataset, tmp_path):
 def test_register_images_biomechanical_with_label_baselines(dataset, tmp_path):
     summary = physreg.register_images(tmp_path / "ri", dataset=dataset, cycles=2, cell_size=8,
                                       baselines="labels", quiet=True)
-    assert set(summary["methods"]) == {"at_rest", "biomechanical", "rigid_labels", "demons_labels", "bspline_labels"}
+    # The initial rigid alignment (default) is reported as a method of its own.
+    assert set(summary["methods"]) == {"at_rest", "initial_alignment", "biomechanical", "rigid_labels", "demons_labels", "bspline_labels"}
+    assert summary["initial_alignment"]["mode"] == "rigid" and all(m["status"] == "ok" for m in summary["methods"].values())
     assert "dice" in json.dumps(summary["methods"]["biomechanical"]).lower()
     assert all(e > 0 for e in summary["estimated_moduli_pa"].values())
     u, g = physreg.read_displacement_field(tmp_path / "ri" / "displacement.nii.gz")

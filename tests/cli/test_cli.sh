@@ -296,7 +296,33 @@ expect_error "register-surface: supports hold every surface node" "take every on
 expect_error "register-surface: negative support stiffness" "--support-stiffness -1" "$physreg" $rs --dataset "$work/push" --state push \
   --support-stiffness -1 -o "$work/rs_bad13"
 expect_error "register-surface: unknown support" "--support 'ligament'" "$physreg" $rs --dataset "$work/push" --state push --support ligament -o "$work/rs_bad14"
-for d in rs_bad10 rs_bad11 rs_bad12 rs_bad13 rs_bad14; do expect_no_file "$work/$d"; done
+# A support given as a labelled surface region (3: the back, where the model's regions say so).
+python3 - "$work/rs_push/regions.vtk" "$work/regions_back.vtk" <<'PY'
+import sys
+lines = open(sys.argv[1]).read().split("\n")
+points = int(next(l for l in lines if l.startswith("POINTS")).split()[1])
+start = next(i for i, l in enumerate(lines) if l.startswith("POINTS")) + 1
+ys = [float(l.split()[1]) for l in lines[start:start + points]]
+poly = next(i for i, l in enumerate(lines) if l.startswith("POLYGONS"))
+faces = [list(map(int, l.split()[1:])) for l in lines[poly + 1:poly + 1 + int(lines[poly].split()[1])]]
+top = sorted(ys)[int(0.9 * len(ys))]
+label = next(i for i, l in enumerate(lines) if l.startswith("SCALARS inside_label")) + 2
+for f, face in enumerate(faces):
+    if sum(ys[v] for v in face) / 3 > top:
+        lines[label + f] = "3"
+open(sys.argv[2], "w").write("\n".join(lines))
+PY
+push_cloud=$(ls "$work"/push/states/push/sparse_cloud_*.csv | head -1)
+expect_ok "register-surface: support from a labelled region" "$physreg" --no-report $rs --model "$work/rs_push/mesh.vtu" --regions "$work/regions_back.vtk" \
+  --cloud "$push_cloud" --support none --support-region 3 -o "$work/rs_region"
+python3 - "$work/rs_region/summary.json" <<'PY' && pass || failed "register-surface: --support-region lists its nodes"
+import json, sys
+s = json.load(open(sys.argv[1]))
+assert [src["source"] for src in s["supports"]["sources"]] == ["region 3"] and s["support_nodes"] > 10, s["supports"]["sources"]
+PY
+expect_error "register-surface: support region absent" "no surface triangle of the model carries that region label" "$physreg" $rs \
+  --model "$work/rs_push/mesh.vtu" --regions "$work/regions_back.vtk" --cloud "$push_cloud" --support-region 7 -o "$work/rs_bad15"
+for d in rs_bad10 rs_bad11 rs_bad12 rs_bad13 rs_bad14 rs_bad15; do expect_no_file "$work/$d"; done
 
 # physreg register-images (paper 002) on the small phantom's insufflation pair: the biomechanical
 # method with label baselines, then bad inputs (each: clear message, non-zero exit, no output).
