@@ -22,6 +22,7 @@
 #include "physreg/mechanics/embedded_beams.hpp"
 #include "physreg/mechanics/membrane.hpp"
 #include "physreg/mechanics/stiffness_assembly.hpp"
+#include "physreg/registration/surface_adjoint.hpp"
 #include "physreg/registration/surface_model.hpp"
 #include "physreg/registration/surface_registration.hpp"
 
@@ -46,6 +47,7 @@ struct Options : CommonOptions {
     std::optional<int> visible;
     std::optional<double> notch_x, young_modulus;
     double poisson = 0.45, cell_size = 7.0, field_spacing = 2.0;
+    double noise = 0.5;
     double d90 = 5.0, traction = 0.5, distance_fraction = 0.9, normal_agreement = 0.7, time_step = 0.1, plateau_tolerance = 0.01, max_pair = 40.0;
     int max_steps = 100, newton_per_step = 1;
     unsigned seed = 1;
@@ -397,7 +399,8 @@ void add_subcommand_register_surface(CLI::App& app)
     sub->add_option("--landmarks", o->landmarks, "Targets at rest (CSV/FCSV/.mrk.json) to map through the registration");
     sub->add_option("--landmarks-truth", o->landmarks_truth, "Their true deformed positions (same names): TRE in the summary");
     sub->add_option("--truth-surface", o->truth_surface, "The true deformed liver surface (STL/PLY/OBJ): Hausdorff distance in the summary");
-    sub->add_option("--method", o->method, "biomechanical (default), rigid (labelled rigid ICP) or icp (plain ICP); all three are reported");
+    sub->add_option("--method", o->method, "biomechanical (default), adjoint (optimal control: static elastic model, unknown surface forces, "
+                                           "issue 32), rigid (labelled rigid ICP) or icp (plain ICP); the others are reported beside it");
     sub->add_option("--model-kind", o->model_kind, "homogeneous (default: parenchyma only) or heterogeneous (plus Glisson's capsule: a membrane "
                                                   "of 8 000 kPa on the surface, paper 001)");
     sub->add_option("--capsule-thickness", o->capsule_thickness, "Heterogeneous model: capsule thickness, mm (default 0.1)");
@@ -424,6 +427,8 @@ void add_subcommand_register_surface(CLI::App& app)
     sub->add_option("--support-nodes", o->support_nodes, "Further support: a file of model node ids (one or more per line, '#' comments)");
     sub->add_option("--support-stiffness", o->support_stiffness, "0 (default): supports held; > 0: springs of this stiffness, N/mm per node "
                                                                  "and direction, to the rest position (ligaments stretch)");
+    sub->add_option("--noise", o->noise, "--method adjoint: the cloud's noise σ, mm, for the discrepancy principle that picks the "
+                                         "regularisation weight (default 0.5)");
     sub->add_option("--support-tolerance", o->support_tolerance, "Rigid baselines: a pose that moves a support node farther than this is "
                                                                  "implausible, mm (default 3)");
     sub->add_option("--time-step", o->time_step, "Backward Euler time step, s (default 0.1)");
@@ -437,8 +442,12 @@ void add_subcommand_register_surface(CLI::App& app)
     sub->add_flag("--json", o->json, "Print the summary as JSON on stdout");
     sub->callback([o] {
         const auto start = std::chrono::steady_clock::now();
-        if (o->method != "biomechanical" && o->method != "rigid" && o->method != "icp")
-            fail("--method '{}': use biomechanical, rigid or icp", o->method);
+        if (o->method != "biomechanical" && o->method != "rigid" && o->method != "icp" && o->method != "adjoint")
+            fail("--method '{}': use biomechanical, adjoint, rigid or icp", o->method);
+        if (o->method == "adjoint" && o->support_stiffness > 0)
+            fail("--method adjoint: --support-stiffness {} N/mm: the adjoint method holds its supports (or, with --support none, ties every node by "
+                 "soft springs); elastic supports are for the biomechanical method", o->support_stiffness);
+        if (!(o->noise > 0) || !std::isfinite(o->noise)) fail("--noise {} mm must be > 0", o->noise);
         const double E = young_modulus(*o);
         StagedDirectory staging(o->output, o->replace); // refuses an existing output before any work
         ProgressDisplay bar("register-surface");
@@ -531,6 +540,33 @@ void add_subcommand_register_surface(CLI::App& app)
                                  {"time_split_s", {{"matching", b.matching_s}, {"forces", b.force_s}, {"assembly", b.assembly_s},
                                                    {"factorisation", b.factorisation_s}, {"solves", b.solve_s}}},
                                  {"plateaus", plateaus}}});
+        }
+        if (o->method == "adjoint") {
+            bar.update(0.6, "adjoint registration");
+            AdjointSurfaceOptions a;
+            a.matching = options.matching;
+            a.young_modulus_pa = E;
+            a.poisson_ratio = o->poisson;
+            a.fixed_nodes = options.fixed_nodes;
+            a.noise_mm = o->noise;
+            const AdjointSurfaceResult r = register_surface_adjoint(in.mesh, matcher, in.cloud, a, [&](double f, const std::string& m) {
+                bar.update(0.6 + 0.3 * f, m);
+            });
+            json rungs = json::array();
+            for (const auto& g : r.rungs)
+                rungs.push_back({{"alpha_mm2_per_mj", g.alpha}, {"rms_distance_mm", g.rms_distance_mm}, {"strain_energy_mj", g.strain_energy_mj},
+                                 {"lbfgs_iterations", g.lbfgs_iterations}, {"pairs", g.pairs}});
+            outcomes.push_back({"adjoint", r.displacement_mm, r.seconds,
+                                {{"model", "static small-strain linear elasticity (CHOLMOD), unknown surface forces"},
+                                 {"regularisation", "alpha x strain energy"},
+                                 {"alpha_rule", fmt::format("discrepancy principle: the largest alpha whose RMS point-to-plane distance is <= {} x the noise {} mm",
+                                                            a.discrepancy_factor, a.noise_mm)},
+                                 {"chosen_alpha_mm2_per_mj", r.rungs[r.chosen].alpha}, {"discrepancy_reached", r.discrepancy_reached},
+                                 {"rungs", rungs}, {"solves", r.solves}, {"warnings", r.warnings},
+                                 {"supports", a.fixed_nodes.empty() ? "none: soft springs to rest at every node" : "held"}}});
+            if (!r.discrepancy_reached)
+                logger()->warn("register-surface: the adjoint method never brought the cloud within {:.2f} mm (RMS); the smallest alpha is kept",
+                               a.discrepancy_factor * a.noise_mm);
         }
         bar.update(0.92, "evaluation and outputs");
         const std::vector<NodeEmbedding> landmark_cells =
@@ -630,7 +666,8 @@ void add_subcommand_register_surface(CLI::App& app)
         if (o->json)
             std::cout << summary.dump(2) << "\n";
         else
-            for (const char* name : {"at_rest", "icp", "rigid", "biomechanical"}) std::cerr << line(name) << "\n";
+            for (const char* name : {"at_rest", "icp", "rigid", "biomechanical", "adjoint"})
+                if (methods.contains(name)) std::cerr << line(name) << "\n";
         if (!summary["determinacy"]["pose_determined"].get<bool>()) {
             logger()->warn("register-surface: {}", summary["determinacy"]["statement"].get<std::string>());
             for (const auto& note : summary["determinacy"]["notes"]) logger()->warn("  {}", note.get<std::string>());

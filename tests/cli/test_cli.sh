@@ -283,6 +283,20 @@ assert s["inputs"]["visible_percent"] == 90, s["inputs"]
 e = json.load(open(sys.argv[2]))
 assert e["supports"]["kind"] == "elastic" and e["supports"]["stiffness_n_per_mm"] == 0.5
 PY
+expect_ok "register-surface --method adjoint on the push" "$physreg" --no-report $rs --dataset "$work/push" --state push --method adjoint -o "$work/rs_adjoint"
+python3 - "$work/rs_adjoint/summary.json" <<'PY' && pass || failed "register-surface --method adjoint: beats at rest, reports its alpha ladder"
+import json, sys
+s = json.load(open(sys.argv[1]))
+m = s["methods"]
+assert s["method"] == "adjoint"
+a = m["adjoint"]
+assert a["tre"]["internal"]["mean_mm"] < 0.7 * m["at_rest"]["tre"]["internal"]["mean_mm"], (a["tre"], m["at_rest"]["tre"])
+assert a["rungs"] and a["chosen_alpha_mm2_per_mj"] == a["rungs"][-1]["alpha_mm2_per_mj"] and "discrepancy" in a["alpha_rule"]
+assert all(r1["alpha_mm2_per_mj"] < r0["alpha_mm2_per_mj"] for r0, r1 in zip(a["rungs"], a["rungs"][1:]))
+PY
+expect_error "register-surface: adjoint with elastic supports" "the adjoint method holds its supports" "$physreg" $rs --dataset "$work/push" --state push \
+  --method adjoint --support-stiffness 1 -o "$work/rs_bad16"
+expect_error "register-surface: zero noise" "--noise 0 mm must be > 0" "$physreg" $rs --dataset "$work/push" --state push --method adjoint --noise 0 -o "$work/rs_bad17"
 printf '# far from the liver\nname,x,y,z\nfar,900,900,900\n' > "$work/far_support.csv"
 expect_error "register-surface: support points off the model" "no surface node within --support-radius" "$physreg" $rs --dataset "$work/push" \
   --state push --support-points "$work/far_support.csv" -o "$work/rs_bad10"
@@ -322,7 +336,7 @@ assert [src["source"] for src in s["supports"]["sources"]] == ["region 3"] and s
 PY
 expect_error "register-surface: support region absent" "no surface triangle of the model carries that region label" "$physreg" $rs \
   --model "$work/rs_push/mesh.vtu" --regions "$work/regions_back.vtk" --cloud "$push_cloud" --support-region 7 -o "$work/rs_bad15"
-for d in rs_bad10 rs_bad11 rs_bad12 rs_bad13 rs_bad14 rs_bad15; do expect_no_file "$work/$d"; done
+for d in rs_bad10 rs_bad11 rs_bad12 rs_bad13 rs_bad14 rs_bad15 rs_bad16 rs_bad17; do expect_no_file "$work/$d"; done
 
 # physreg register-images (paper 002) on the small phantom's insufflation pair: the biomechanical
 # method with label baselines, then bad inputs (each: clear message, non-zero exit, no output).

@@ -1,0 +1,70 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+#pragma once
+// Issue 32 item 2: registration to a partial surface as an optimal-control problem (after Mestdagh
+// & Cotin, MICCAI 2022). The unknowns are nodal forces f on the free surface nodes; the model is
+// static small-strain linear elasticity (paper 002's LinearElasticModel: one CHOLMOD factorisation
+// serves every solve), held at the supports, or — with no support — tied to rest by soft springs in
+// the stiffness (BCF-FEM's way of needing no boundary condition). With the pairs fixed,
+//   J(f) = ½ mean_p (n_p · (x_p(u) − q_p))² + α ½ uᵀ K u,   u = K⁻¹ f,
+// point-to-plane distances of the cloud points q_p to their closest triangles (n_p the triangle's
+// normal at pairing) plus α × the strain energy. Its gradient needs one adjoint solve:
+//   ∂J/∂f = K⁻¹ g_u + α u,   g_u = ∂(data)/∂u.
+// L-BFGS (liblbfgs) minimises J for fixed pairs; the pairs are then recomputed (an ICP-like outer
+// loop). α runs down a decade-and-a-half ladder from a stiff start, each warm-started from the
+// last; the discrepancy principle keeps the first (largest) α whose RMS cloud distance falls to
+// τ × the noise σ. Every rung is reported (an L-curve: distance against energy).
+// Small strain is an approximation for pushes of tens of mm: the co-rotational law would need the
+// tangent's derivative in the adjoint; said where the result is reported.
+#include "physreg/mesh/volume_mesh.hpp"
+#include "physreg/registration/surface_matching.hpp"
+
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace physreg {
+
+struct AdjointSurfaceOptions {
+    MatchingOptions matching;
+    double young_modulus_pa = 3500.0;
+    double poisson_ratio = 0.45;
+    std::vector<std::int32_t> fixed_nodes;       ///< held supports; empty: soft springs everywhere
+    double soft_spring_fraction = 1e-4;          ///< no support: spring = this × the mean diagonal of K
+    double noise_mm = 0.5;                       ///< σ of the cloud, for the discrepancy principle
+    double discrepancy_factor = 1.5;             ///< τ: stop at RMS distance ≤ τ σ (the model's own discretisation error adds to σ)
+    int alpha_steps = 13;                        ///< α_k = α_0 · 10^(−k/2), k = 0 … steps−1
+    int outer_iterations = 6;                    ///< re-pairings per α
+    int lbfgs_iterations = 60;                   ///< per re-pairing
+    void validate() const;
+};
+
+struct AdjointRung {
+    double alpha = 0.0;              ///< mm²/mJ
+    double rms_distance_mm = 0.0;    ///< point-to-plane, over the final pairs
+    double strain_energy_mj = 0.0;
+    int lbfgs_iterations = 0;
+    int pairs = 0;
+};
+
+struct AdjointSurfaceResult {
+    std::vector<double> displacement_mm;   ///< 3 per node
+    std::vector<double> force_n;           ///< 3 per node
+    std::vector<AdjointRung> rungs;        ///< in the order tried
+    std::size_t chosen = 0;                ///< index into rungs
+    bool discrepancy_reached = false;      ///< false: the smallest α was kept (noise level never reached)
+    std::vector<std::string> warnings;     ///< L-BFGS stops other than convergence, with their history
+    int solves = 0;
+    double seconds = 0.0;
+};
+
+/// Throws Error for bad options, a cloud with no pair left, or a singular model.
+AdjointSurfaceResult register_surface_adjoint(const VolumeMesh& mesh, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
+                                              const AdjointSurfaceOptions& options,
+                                              const std::function<void(double, const std::string&)>& progress = {});
+
+/// For the gradient test: J and ∂J/∂f (free surface dofs only; others zero) at forces `f` (3 per
+/// node) for the pairs of the rest shape, with weight `alpha`.
+double adjoint_surface_objective(const VolumeMesh& mesh, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
+                                 const AdjointSurfaceOptions& options, double alpha, const std::vector<double>& f, std::vector<double>& gradient);
+
+} // namespace physreg
