@@ -259,6 +259,10 @@ expect_error "register-surface: vessels without the heterogeneous model" "only t
 # beat leaving the liver at rest; the rigid baselines must not turn it more than the truth does.
 expect_ok "phantom with the large local push" "$physreg" --log-level warn phantom --preset small --seed 2 --materials healthy --organs-only \
   --depths 5 --no-calculix --insufflation-pa 0 --push-depth 30 --push-tool-radius 15 -o "$work/push"
+expect_error "phantom: push deeper than allowed" "--push-depth 90 mm outside [0, 80]" "$physreg" phantom --preset small --organs-only --push-depth 90 -o "$work/ph_push_bad1"
+expect_error "phantom: push deeper than the lobe" "the right lobe is at most" "$physreg" --log-level warn phantom --preset small --seed 2 --organs-only \
+  --depths 5 --no-calculix --insufflation-pa 0 --push-depth 79 -o "$work/ph_push_bad2"
+for d in ph_push_bad1 ph_push_bad2; do expect_no_file "$work/$d"; done
 expect_ok "register-surface on the push (defaults)" "$physreg" --no-report $rs --dataset "$work/push" --state push -o "$work/rs_push"
 expect_ok "register-surface on the push, elastic supports" "$physreg" --no-report $rs --dataset "$work/push" --state push \
   --support-stiffness 0.5 --method rigid -o "$work/rs_push_elastic"
