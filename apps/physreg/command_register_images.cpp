@@ -614,7 +614,11 @@ void add_subcommand_register_images_impl(CLI::App& app)
         for (const auto& m : outcomes) {
             const json& r = methods[m.name];
             std::string line = fmt::format("{:<20}", m.name);
-            if (r.contains("tre")) line += fmt::format(" TRE {:.2f} mm (internal {:.2f})", r["tre"]["all"]["mean_mm"].get<double>(), r["tre"]["internal"]["mean_mm"].get<double>());
+            if (r.contains("tre")) {
+                // A group without landmarks has null statistics (issue 28 item 6).
+                const auto mm = [](const json& v) { return v.is_number() ? fmt::format("{:.2f}", v.get<double>()) : std::string("–"); };
+                line += fmt::format(" TRE {} mm (internal {})", mm(r["tre"]["all"]["mean_mm"]), mm(r["tre"]["internal"]["mean_mm"]));
+            }
             double dice = 0.0;
             for (const auto& [k, v] : r["dice"].items()) dice += v.get<double>();
             line += fmt::format(", mean Dice {:.3f}, {:.1f} s", dice / std::max<std::size_t>(1, r["dice"].size()), m.seconds);

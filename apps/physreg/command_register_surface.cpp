@@ -657,7 +657,10 @@ void add_subcommand_register_surface(CLI::App& app)
         const auto line = [&](const std::string& name) {
             const json& m = methods[name];
             std::string s = fmt::format("{:<14}", name);
-            if (m.contains("tre")) s += fmt::format(" TRE {:.2f} mm (internal {:.2f})", m["tre"]["all"]["mean_mm"].get<double>(), m["tre"]["internal"]["mean_mm"].get<double>());
+            if (m.contains("tre")) {
+                const auto mm = [](const json& v) { return v.is_number() ? fmt::format("{:.2f}", v.get<double>()) : std::string("–"); };
+                s += fmt::format(" TRE {} mm (internal {})", mm(m["tre"]["all"]["mean_mm"]), mm(m["tre"]["internal"]["mean_mm"]));
+            }
             if (m.contains("node_tre_mm")) s += fmt::format(", nodes {:.2f} mm", m["node_tre_mm"]["mean"].get<double>());
             if (m.contains("hausdorff_mm")) s += fmt::format(", Hausdorff mean {:.2f} / max {:.2f} mm", m["hausdorff_mm"]["mean"].get<double>(), m["hausdorff_mm"]["max"].get<double>());
             s += fmt::format(", cloud→model {:.2f} mm, {:.2f} s", m["cloud_to_model_mm"]["mean"].get<double>(), m["seconds"].get<double>());
