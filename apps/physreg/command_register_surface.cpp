@@ -557,7 +557,7 @@ void add_subcommand_register_surface(CLI::App& app)
                 rungs.push_back({{"alpha_mm2_per_mj", g.alpha}, {"rms_distance_mm", g.rms_distance_mm}, {"strain_energy_mj", g.strain_energy_mj},
                                  {"lbfgs_iterations", g.lbfgs_iterations}, {"pairs", g.pairs}});
             outcomes.push_back({"adjoint", r.displacement_mm, r.seconds,
-                                {{"model", "static small-strain linear elasticity (CHOLMOD), unknown surface forces"},
+                                {{"model", "static co-rotational linear tetrahedra, re-linearised (R K0 R^T, CHOLMOD) at every re-pairing; unknown surface forces"},
                                  {"regularisation", "alpha x strain energy"},
                                  {"alpha_rule", fmt::format("discrepancy principle: the largest alpha whose RMS point-to-plane distance is <= {} x the noise {} mm",
                                                             a.discrepancy_factor, a.noise_mm)},

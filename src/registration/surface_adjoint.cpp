@@ -3,7 +3,10 @@
 
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
-#include "physreg/mechanics/linear_elasticity.hpp"
+#include "physreg/mechanics/linear_solver.hpp"
+#include "physreg/mechanics/stiffness_assembly.hpp"
+#include "physreg/mechanics/tled_model.hpp"
+#include "physreg/registration/surface_model.hpp"
 
 #include <lbfgs.h>
 
@@ -39,16 +42,58 @@ struct FixedPair {
 
 struct Problem {
     const VolumeMesh& mesh;
-    std::unique_ptr<LinearElasticModel> model;
+    std::unique_ptr<TledModel> model;            ///< co-rotational linear tetrahedra
+    std::unique_ptr<StiffnessAssembler> assembler;
+    SymmetricSolver solver{[] { LinearSolverOptions o; o.kind = LinearSolverKind::cholmod; return o; }()};
+    SparseMatrix k;                              ///< K_R(u_k) with the held dofs as identity rows
+    std::vector<std::uint8_t> fixed;             ///< per dof
+    double anchor = 0.0;                         ///< soft spring per dof (no support), N/mm
     std::vector<std::int32_t> unknown_nodes;     ///< free surface nodes
     std::vector<FixedPair> pairs;
     double alpha = 0.0;
     double scale = 1.0;                          ///< f = scale · v (N per unit of v)
     int solves = 0;
-    Eigen::VectorXd f, u, g, lambda;
+    // The linearisation point: u = u_k + K_R⁻¹ (f − f_int(u_k)) (lagged co-rotational; never moved
+    // for the small-strain model), W ≈ W_k + f_int_k·Δ + ½ Δ·K_R Δ.
+    Eigen::VectorXd u_k, f_int_k, c_k;           ///< c_k = K_R⁻¹ f_int_k
+    double w_k = 0.0;
+    Eigen::VectorXd f, u, g, lambda, rhs;
     std::vector<double> history;                 ///< J per L-BFGS iteration of the current run
 
     explicit Problem(const VolumeMesh& m) : mesh(m) {}
+
+    void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x)
+    {
+        rhs = b;
+        for (Eigen::Index i = 0; i < rhs.size(); ++i)
+            if (fixed[static_cast<std::size_t>(i)]) rhs[i] = 0.0;
+        solver.solve_factored(rhs, x);
+        ++solves;
+    }
+
+    /// Re-linearises at `at` (the co-rotational model) or at rest.
+    void linearise(const Eigen::VectorXd& at)
+    {
+        const auto n = static_cast<Eigen::Index>(3 * mesh.node_count());
+        u_k = at.size() ? at : Eigen::VectorXd::Zero(n);
+        f_int_k.setZero(n);
+        const Assembly a = assembler->assemble(u_k.data(), f_int_k.data(), &k);
+        if (a.inverted_element >= 0) fail("adjoint registration: element {} inverted at the linearisation point", a.inverted_element);
+        w_k = a.energy_mj;
+        if (anchor > 0) {
+            for (Eigen::Index i = 0; i < n; ++i) f_int_k[i] += anchor * u_k[i];
+            w_k += 0.5 * anchor * u_k.squaredNorm();
+        }
+        // Held dofs: identity rows and columns (u stays 0 there); the soft springs on the diagonal.
+        for (int c = 0; c < k.outerSize(); ++c)
+            for (SparseMatrix::InnerIterator it(k, c); it; ++it) {
+                const bool held = fixed[static_cast<std::size_t>(it.row())] || fixed[static_cast<std::size_t>(it.col())];
+                if (held) it.valueRef() = it.row() == it.col() ? 1.0 : 0.0;
+                else if (it.row() == it.col()) it.valueRef() += anchor;
+            }
+        solver.factorise(k);
+        solve(f_int_k, c_k);
+    }
 
     /// J at unknowns v (scaled forces); gradient wrt v when `grad` is given.
     double evaluate(const double* v, double* grad)
@@ -57,45 +102,48 @@ struct Problem {
         f.setZero(static_cast<Eigen::Index>(n));
         for (std::size_t q = 0; q < unknown_nodes.size(); ++q)
             for (int d = 0; d < 3; ++d) f[3 * unknown_nodes[q] + d] = scale * v[3 * q + static_cast<std::size_t>(d)];
-        model->solve(f, u);
-        ++solves;
+        Eigen::VectorXd delta;
+        solve(f - f_int_k, delta);
+        u = u_k + delta;
         g.setZero(static_cast<Eigen::Index>(n));
         double data = 0.0;
         const double inv = 1.0 / static_cast<double>(std::max<std::size_t>(1, pairs.size()));
         for (const auto& p : pairs) {
             Vec3 x = Vec3::Zero();
-            for (int k = 0; k < 3; ++k) {
-                const auto node = static_cast<std::size_t>(p.nodes[static_cast<std::size_t>(k)]);
-                x += p.weights[static_cast<std::size_t>(k)] * (mesh.nodes[node] + Vec3(u[3 * node], u[3 * node + 1], u[3 * node + 2]));
+            for (int k3 = 0; k3 < 3; ++k3) {
+                const auto node = static_cast<std::size_t>(p.nodes[static_cast<std::size_t>(k3)]);
+                x += p.weights[static_cast<std::size_t>(k3)] * (mesh.nodes[node] + Vec3(u[3 * node], u[3 * node + 1], u[3 * node + 2]));
             }
             const double r = p.normal.dot(x - p.target);
             data += 0.5 * inv * r * r;
-            for (int k = 0; k < 3; ++k) {
-                const auto node = static_cast<Eigen::Index>(p.nodes[static_cast<std::size_t>(k)]);
-                for (int d = 0; d < 3; ++d) g[3 * node + d] += inv * r * p.weights[static_cast<std::size_t>(k)] * p.normal[d];
+            for (int k3 = 0; k3 < 3; ++k3) {
+                const auto node = static_cast<Eigen::Index>(p.nodes[static_cast<std::size_t>(k3)]);
+                for (int d = 0; d < 3; ++d) g[3 * node + d] += inv * r * p.weights[static_cast<std::size_t>(k3)] * p.normal[d];
             }
         }
-        const double energy = 0.5 * f.dot(u); // ½ uᵀ K u with K u = f at the free dofs, u = 0 at the held ones
+        // W ≈ W_k + f_int_k·Δ + ½ Δ·K_R Δ with K_R Δ = f − f_int_k at the free dofs (Δ = 0 at held ones).
+        const double energy = w_k + f_int_k.dot(delta) + 0.5 * delta.dot(f - f_int_k);
         if (grad) {
-            model->solve(g, lambda); // the adjoint: K symmetric
-            ++solves;
+            solve(g, lambda); // the adjoint: K_R symmetric; ∂W/∂f = K_R⁻¹ f = Δ + c_k
             for (std::size_t q = 0; q < unknown_nodes.size(); ++q)
                 for (int d = 0; d < 3; ++d) {
                     const auto dof = static_cast<Eigen::Index>(3 * unknown_nodes[q] + d);
-                    grad[3 * q + static_cast<std::size_t>(d)] = scale * (lambda[dof] + alpha * u[dof]);
+                    grad[3 * q + static_cast<std::size_t>(d)] = scale * (lambda[dof] + alpha * (delta[dof] + c_k[dof]));
                 }
         }
+        last_energy = energy;
         return data + alpha * energy;
     }
+    double last_energy = 0.0;
 
     double rms_distance() const
     {
         double sum = 0.0;
         for (const auto& p : pairs) {
             Vec3 x = Vec3::Zero();
-            for (int k = 0; k < 3; ++k) {
-                const auto node = static_cast<std::size_t>(p.nodes[static_cast<std::size_t>(k)]);
-                x += p.weights[static_cast<std::size_t>(k)] * (mesh.nodes[node] + Vec3(u[3 * node], u[3 * node + 1], u[3 * node + 2]));
+            for (int k3 = 0; k3 < 3; ++k3) {
+                const auto node = static_cast<std::size_t>(p.nodes[static_cast<std::size_t>(k3)]);
+                x += p.weights[static_cast<std::size_t>(k3)] * (mesh.nodes[node] + Vec3(u[3 * node], u[3 * node + 1], u[3 * node + 2]));
             }
             sum += std::pow(p.normal.dot(x - p.target), 2);
         }
@@ -143,9 +191,20 @@ void pair_at(Problem& problem, const SurfaceMatcher& matcher, const LabelledPoin
 std::unique_ptr<Problem> make_problem(const VolumeMesh& mesh, const SurfaceMatcher& matcher, const AdjointSurfaceOptions& options)
 {
     auto problem = std::make_unique<Problem>(mesh);
-    LinearElasticOptions elastic;
-    elastic.default_poisson_ratio = options.poisson_ratio;
-    elastic.fixed_nodes = options.fixed_nodes;
+    TledOptions tled;
+    tled.law = MaterialLaw::corotational;
+    VolumeMesh one = mesh;
+    std::fill(one.cell_labels.begin(), one.cell_labels.end(), 1);
+    problem->model = std::make_unique<TledModel>(one, homogeneous_liver_tissues(options.young_modulus_pa, options.poisson_ratio), tled);
+    problem->assembler = std::make_unique<StiffnessAssembler>(*problem->model);
+    problem->assembler->set_rotated_corotational_tangent(true); // R K₀ Rᵀ: symmetric positive definite
+    problem->k = problem->assembler->make_matrix();
+    const std::size_t n = mesh.node_count();
+    problem->fixed.assign(3 * n, 0);
+    for (const auto node : options.fixed_nodes) {
+        if (node < 0 || static_cast<std::size_t>(node) >= n) fail("adjoint registration: support node {} is not a node of the model", node);
+        for (int d = 0; d < 3; ++d) problem->fixed[3 * static_cast<std::size_t>(node) + static_cast<std::size_t>(d)] = 1;
+    }
     if (options.fixed_nodes.empty()) {
         // No support: soft springs to rest at every node, so K is regular (BCF-FEM's idea).
         double edge = 0.0;
@@ -155,17 +214,19 @@ std::unique_ptr<Problem> make_problem(const VolumeMesh& mesh, const SurfaceMatch
             for (std::size_t a = 0; a < cell.size(); ++a)
                 for (std::size_t b = a + 1; b < cell.size(); ++b) edge += (mesh.nodes[static_cast<std::size_t>(cell[a])] - mesh.nodes[static_cast<std::size_t>(cell[b])]).norm(), ++edges;
         }
-        elastic.anchor_stiffness_n_mm = options.soft_spring_fraction * options.young_modulus_pa * 1e-6 * edge / static_cast<double>(std::max<std::size_t>(1, edges));
+        problem->anchor = options.soft_spring_fraction * options.young_modulus_pa * 1e-6 * edge / static_cast<double>(std::max<std::size_t>(1, edges));
     }
-    problem->model = std::make_unique<LinearElasticModel>(mesh, elastic, "the adjoint registration's model");
-    std::vector<double> moduli(problem->model->structure_count(), options.young_modulus_pa);
-    problem->model->set_young_moduli(moduli);
     std::set<std::int32_t> surface;
     for (const auto& t : matcher.source().triangles) surface.insert(t.begin(), t.end());
     for (const auto node : surface)
-        if (!problem->model->fixed()[static_cast<std::size_t>(node)]) problem->unknown_nodes.push_back(node);
+        if (!problem->fixed[3 * static_cast<std::size_t>(node)]) problem->unknown_nodes.push_back(node);
     if (problem->unknown_nodes.empty()) fail("adjoint registration: every surface node is a support; no force is left to fit the cloud");
-    problem->scale = problem->model->mean_diagonal_n_mm(); // v ≈ mm of motion per unit
+    problem->linearise(Eigen::VectorXd());
+    double diagonal = 0.0;
+    std::size_t free = 0;
+    for (Eigen::Index i = 0; i < problem->k.cols(); ++i)
+        if (!problem->fixed[static_cast<std::size_t>(i)]) diagonal += problem->k.coeff(i, i), ++free;
+    problem->scale = diagonal / static_cast<double>(std::max<std::size_t>(1, free)); // v ≈ mm of motion per unit
     return problem;
 }
 
@@ -200,7 +261,7 @@ AdjointSurfaceResult register_surface_adjoint(const VolumeMesh& mesh, const Surf
     pair_at(*problem, matcher, cloud, options.matching, Eigen::VectorXd());
     // α_0: the balance ½ mean r² against α ½ k u² for one dof of stiffness k (the mean diagonal)
     // gives u = d / (1 + α k P); start 10⁴ times stiffer than even.
-    const double k = problem->model->mean_diagonal_n_mm();
+    const double k = problem->scale; // the mean diagonal of K, N/mm
     const double alpha0 = 1e4 / (k * static_cast<double>(problem->pairs.size()));
     const double target = options.discrepancy_factor * options.noise_mm;
     lbfgs_parameter_t parameters;
@@ -213,7 +274,13 @@ AdjointSurfaceResult register_surface_adjoint(const VolumeMesh& mesh, const Surf
         AdjointRung rung;
         rung.alpha = problem->alpha;
         for (int outer = 0; outer < options.outer_iterations; ++outer) {
-            if (outer > 0 || step > 0) pair_at(*problem, matcher, cloud, options.matching, problem->u);
+            if (outer > 0 || step > 0) {
+                pair_at(*problem, matcher, cloud, options.matching, problem->u);
+                if (options.corotational) {
+                    // Lagged co-rotational: re-linearise at the current state, keep the forces.
+                    problem->linearise(problem->u);
+                }
+            }
             problem->history.clear();
             double fx = 0.0;
             const int status = lbfgs(static_cast<int>(v.size()), v.data(), &fx, evaluate_lbfgs, record_progress, problem.get(), &parameters);
@@ -229,7 +296,7 @@ AdjointSurfaceResult register_surface_adjoint(const VolumeMesh& mesh, const Surf
             problem->evaluate(v.data(), nullptr); // u at the final v
         }
         rung.rms_distance_mm = problem->rms_distance();
-        rung.strain_energy_mj = 0.5 * problem->f.dot(problem->u);
+        rung.strain_energy_mj = problem->last_energy;
         rung.pairs = static_cast<int>(problem->pairs.size());
         result.rungs.push_back(rung);
         logger()->debug("adjoint registration: α {:.3g}: RMS distance {:.3f} mm, strain energy {:.4g} mJ, {} L-BFGS iterations", rung.alpha,
@@ -244,6 +311,8 @@ AdjointSurfaceResult register_surface_adjoint(const VolumeMesh& mesh, const Surf
         }
     }
     problem->evaluate(best_v.data(), nullptr);
+    for (std::size_t i = 0; i < problem->fixed.size(); ++i)
+        if (problem->fixed[i]) problem->u[static_cast<Eigen::Index>(i)] = 0.0;
     result.displacement_mm.assign(problem->u.data(), problem->u.data() + problem->u.size());
     result.force_n.assign(problem->f.data(), problem->f.data() + problem->f.size());
     result.solves = problem->solves;

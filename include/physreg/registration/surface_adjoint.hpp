@@ -2,19 +2,20 @@
 #pragma once
 // Issue 32 item 2: registration to a partial surface as an optimal-control problem (after Mestdagh
 // & Cotin, MICCAI 2022). The unknowns are nodal forces f on the free surface nodes; the model is
-// static small-strain linear elasticity (paper 002's LinearElasticModel: one CHOLMOD factorisation
-// serves every solve), held at the supports, or — with no support — tied to rest by soft springs in
-// the stiffness (BCF-FEM's way of needing no boundary condition). With the pairs fixed,
-//   J(f) = ½ mean_p (n_p · (x_p(u) − q_p))² + α ½ uᵀ K u,   u = K⁻¹ f,
+// static co-rotational linear tetrahedra (the law paper 001's model uses), held at the supports, or
+// — with no support — tied to rest by soft springs (BCF-FEM's way of needing no boundary
+// condition). It is solved lagged: about a linearisation point u_k (the rest shape first, then the
+// state at every re-pairing) u = u_k + K_R⁻¹ (f − f_int(u_k)), K_R = R K₀ Rᵀ (one CHOLMOD factor per
+// re-pairing). With the pairs and u_k fixed,
+//   J(f) = ½ mean_p (n_p · (x_p(u) − q_p))² + α W(u),  W ≈ W_k + f_int_k·Δ + ½ Δ·K_R Δ,
 // point-to-plane distances of the cloud points q_p to their closest triangles (n_p the triangle's
 // normal at pairing) plus α × the strain energy. Its gradient needs one adjoint solve:
-//   ∂J/∂f = K⁻¹ g_u + α u,   g_u = ∂(data)/∂u.
-// L-BFGS (liblbfgs) minimises J for fixed pairs; the pairs are then recomputed (an ICP-like outer
-// loop). α runs down a decade-and-a-half ladder from a stiff start, each warm-started from the
-// last; the discrepancy principle keeps the first (largest) α whose RMS cloud distance falls to
+//   ∂J/∂f = K_R⁻¹ g_u + α K_R⁻¹ f,  g_u = ∂(data)/∂u  (K_R⁻¹ f = Δ + K_R⁻¹ f_int_k).
+// L-BFGS (liblbfgs) minimises J; the pairs are then recomputed and the model re-linearised (an
+// ICP-like outer loop). α runs down a half-decade ladder from a stiff start, each warm-started from
+// the last; the discrepancy principle keeps the first (largest) α whose RMS cloud distance falls to
 // τ × the noise σ. Every rung is reported (an L-curve: distance against energy).
-// Small strain is an approximation for pushes of tens of mm: the co-rotational law would need the
-// tangent's derivative in the adjoint; said where the result is reported.
+// `corotational = false` keeps the rest linearisation: small-strain linear elasticity.
 #include "physreg/mesh/volume_mesh.hpp"
 #include "physreg/registration/surface_matching.hpp"
 
@@ -35,6 +36,10 @@ struct AdjointSurfaceOptions {
     int alpha_steps = 13;                        ///< α_k = α_0 · 10^(−k/2), k = 0 … steps−1
     int outer_iterations = 6;                    ///< re-pairings per α
     int lbfgs_iterations = 60;                   ///< per re-pairing
+    /// true: co-rotational linear tetrahedra, re-linearised (R K₀ Rᵀ and the co-rotational internal
+    /// force) at every re-pairing, the forces kept (lagged: exact gradients of each linearised
+    /// problem); false: small-strain linear elasticity about the rest shape.
+    bool corotational = true;
     void validate() const;
 };
 
