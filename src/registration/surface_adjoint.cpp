@@ -233,10 +233,15 @@ std::unique_ptr<Problem> make_problem(const VolumeMesh& mesh, const SurfaceMatch
 } // namespace
 
 double adjoint_surface_objective(const VolumeMesh& mesh, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
-                                 const AdjointSurfaceOptions& options, double alpha, const std::vector<double>& f, std::vector<double>& gradient)
+                                 const AdjointSurfaceOptions& options, double alpha, const std::vector<double>& f, std::vector<double>& gradient,
+                                 const std::vector<double>* linearisation_mm)
 {
     options.validate();
     auto problem = make_problem(mesh, matcher, options);
+    if (linearisation_mm) {
+        if (linearisation_mm->size() != 3 * mesh.node_count()) fail("adjoint objective: linearisation point of {} values", linearisation_mm->size());
+        problem->linearise(Eigen::Map<const Eigen::VectorXd>(linearisation_mm->data(), static_cast<Eigen::Index>(linearisation_mm->size())));
+    }
     pair_at(*problem, matcher, cloud, options.matching, Eigen::VectorXd());
     problem->alpha = alpha;
     std::vector<double> v(3 * problem->unknown_nodes.size()), g(v.size());

@@ -68,8 +68,10 @@ AdjointSurfaceResult register_surface_adjoint(const VolumeMesh& mesh, const Surf
                                               const std::function<void(double, const std::string&)>& progress = {});
 
 /// For the gradient test: J and ∂J/∂f (free surface dofs only; others zero) at forces `f` (3 per
-/// node) for the pairs of the rest shape, with weight `alpha`.
+/// node) for the pairs of the rest shape, with weight `alpha`, linearised at rest or at
+/// `linearisation_mm` (3 per node; the co-rotational model's re-linearisation).
 double adjoint_surface_objective(const VolumeMesh& mesh, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
-                                 const AdjointSurfaceOptions& options, double alpha, const std::vector<double>& f, std::vector<double>& gradient);
+                                 const AdjointSurfaceOptions& options, double alpha, const std::vector<double>& f, std::vector<double>& gradient,
+                                 const std::vector<double>* linearisation_mm = nullptr);
 
 } // namespace physreg
