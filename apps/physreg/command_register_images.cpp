@@ -332,18 +332,8 @@ void add_subcommand_register_images_impl(CLI::App& app)
         if (initial_mode == InitialAlignment::identity) {
             // Frames that do not overlap at all: no method here can relate them (there is no initial
             // alignment yet), so say so before any work instead of returning an unrelated result.
-            const auto box = [](const ImageGeometry& g) {
-                Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
-                for (int corner = 0; corner < 8; ++corner) {
-                    Vec3 index;
-                    for (int a = 0; a < 3; ++a) index[a] = ((corner >> a) & 1) ? double(g.size[a]) - 0.5 : -0.5;
-                    lo = lo.cwiseMin(g.index_to_physical(index));
-                    hi = hi.cwiseMax(g.index_to_physical(index));
-                }
-                return std::pair{lo, hi};
-            };
-            const auto [flo, fhi] = box(in.fixed.geometry);
-            const auto [mlo, mhi] = box(in.moving.geometry);
+            const auto [flo, fhi] = in.fixed.geometry.physical_box();
+            const auto [mlo, mhi] = in.moving.geometry.physical_box();
             if ((flo.array() > mhi.array()).any() || (mlo.array() > fhi.array()).any())
                 fail("register-images: the fixed and moving images do not overlap in physical space (fixed [{:.1f} {:.1f} {:.1f}]–[{:.1f} {:.1f} {:.1f}] "
                      "mm, moving [{:.1f} {:.1f} {:.1f}]–[{:.1f} {:.1f} {:.1f}] mm); bring them into one frame first or use --initial centroid|rigid",

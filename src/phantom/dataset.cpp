@@ -354,14 +354,7 @@ SolvedState solve_compression_once(const GroundTruthModel& m, const PhantomSpec&
                                    std::string& slipped)
 {
     const Vec3 d = c.direction.normalized();
-    const auto& g = p.labels.geometry;
-    Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
-    for (int corner = 0; corner < 8; ++corner) {
-        Vec3 index;
-        for (int a = 0; a < 3; ++a) index[a] = ((corner >> a) & 1) ? double(g.size[a]) - 0.5 : -0.5;
-        lo = lo.cwiseMin(g.index_to_physical(index));
-        hi = hi.cwiseMax(g.index_to_physical(index));
-    }
+    const auto [lo, hi] = p.labels.geometry.physical_box();
     const double length = (hi - lo).norm();
     // The line enters through the image's anterior (start of the pressing direction) side.
     const Vec3 centre_line(c.x_mm, 0.5 * (lo.y() + hi.y()), c.z_mm);

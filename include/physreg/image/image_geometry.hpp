@@ -5,6 +5,7 @@
 #include "physreg/core/types.hpp"
 
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 namespace physreg {
@@ -29,6 +30,18 @@ struct ImageGeometry {
     double voxel_volume_mm3() const { return spacing.prod(); }
     /// Throws Error naming `what` if spacing is not positive/finite or direction not orthonormal.
     void validate(const std::string& what) const;
+    /// The axis-aligned physical box (mm, LPS) that the voxels cover (their outer faces), as {lo, hi}.
+    std::pair<Vec3, Vec3> physical_box() const
+    {
+        Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
+        for (int corner = 0; corner < 8; ++corner) {
+            Vec3 index;
+            for (int a = 0; a < 3; ++a) index[a] = ((corner >> a) & 1) ? double(size[a]) - 0.5 : -0.5;
+            lo = lo.cwiseMin(index_to_physical(index));
+            hi = hi.cwiseMax(index_to_physical(index));
+        }
+        return {lo, hi};
+    }
 };
 
 /// A label volume: one integer label per voxel, 0 = background. Labels fit 16 bits.
