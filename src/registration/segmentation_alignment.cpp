@@ -4,8 +4,8 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/image/distance_map.hpp"
+#include "detail/principal_axes.hpp"
 
-#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -80,24 +80,6 @@ StructurePoints collect(const LabelVolume& v, const std::vector<std::int32_t>& s
             b.swap(kept);
         }
     return p;
-}
-
-Vec3 mean_of(const std::vector<Vec3>& points)
-{
-    Vec3 c = Vec3::Zero();
-    for (const auto& x : points) c += x / static_cast<double>(points.size());
-    return c;
-}
-
-Mat3 principal_axes(const std::vector<Vec3>& points, const Vec3& centre)
-{
-    Mat3 c = Mat3::Zero();
-    for (const auto& x : points) c += (x - centre) * (x - centre).transpose();
-    Eigen::SelfAdjointEigenSolver<Mat3> eigen(c);
-    Mat3 axes;
-    for (int k = 0; k < 3; ++k) axes.col(k) = eigen.eigenvectors().col(2 - k);
-    if (axes.determinant() < 0) axes.col(2) *= -1.0;
-    return axes;
 }
 
 // Root mean square of φ over the moving boundary points under (R, t); Gauss–Newton with a
@@ -179,7 +161,8 @@ SegmentationAlignment align_segmentations(const LabelVolume& fixed, const LabelV
     out.mode = mode;
     const StructurePoints f = collect(fixed, structures, "fixed");
     const StructurePoints m = collect(moving, structures, "moving");
-    const Vec3 cf = mean_of(f.all), cm = mean_of(m.all);
+    const detail::PrincipalFrame ff = detail::principal_frame(f.all), fm = detail::principal_frame(m.all);
+    const Vec3 cf = ff.centre, cm = fm.centre;
     out.centroid_distance_mm = (cf - cm).norm();
     std::vector<std::unique_ptr<SignedDistanceMap>> maps;
     for (const auto label : structures)
@@ -194,14 +177,9 @@ SegmentationAlignment align_segmentations(const LabelVolume& fixed, const LabelV
     out.start = "centroids";
     if (mode == InitialAlignment::rigid) {
         // Starts: centroids only; principal axes matched (four right-handed sign choices).
-        const Mat3 af = principal_axes(f.all, cf), am = principal_axes(m.all, cm);
         std::vector<std::pair<std::string, Mat3>> starts{{"centroids", Mat3::Identity()}};
-        for (int signs = 0; signs < 4; ++signs) {
-            Mat3 flip = Mat3::Identity();
-            if (signs & 1) flip(0, 0) = -1, flip(2, 2) *= -1;
-            if (signs & 2) flip(1, 1) = -1, flip(2, 2) *= -1;
-            starts.push_back({"principal axes " + std::to_string(signs), af * flip * am.transpose()});
-        }
+        for (int signs = 0; signs < 4; ++signs)
+            starts.push_back({"principal axes " + std::to_string(signs), ff.axes * detail::axis_flip(signs) * fm.axes.transpose()});
         Fit best{Mat3::Identity(), Vec3::Zero(), std::numeric_limits<double>::infinity(), 0};
         for (const auto& [name, r0] : starts) {
             const Fit fit = refine(maps, m, r0, cf - r0 * cm);

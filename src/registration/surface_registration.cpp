@@ -4,8 +4,8 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/evaluation/surface_distance.hpp"
+#include "detail/principal_axes.hpp"
 
-#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <chrono>
 #include <cmath>
@@ -291,21 +291,6 @@ RigidMotion implied_rigid_motion(const std::vector<double>& rest, const std::vec
 }
 
 namespace {
-struct Frame {
-    Vec3 centre = Vec3::Zero();
-    Mat3 axes = Mat3::Identity(); ///< columns: principal directions, largest spread first, right-handed
-};
-Frame principal_frame(const std::vector<Vec3>& points)
-{
-    Frame f;
-    for (const auto& p : points) f.centre += p / static_cast<double>(points.size());
-    Mat3 c = Mat3::Zero();
-    for (const auto& p : points) c += (p - f.centre) * (p - f.centre).transpose();
-    Eigen::SelfAdjointEigenSolver<Mat3> eigen(c);
-    for (int k = 0; k < 3; ++k) f.axes.col(k) = eigen.eigenvectors().col(2 - k);
-    if (f.axes.determinant() < 0) f.axes.col(2) *= -1.0;
-    return f;
-}
 SurfaceMesh posed_surface(const std::vector<double>& rest, const LabelledTriangles& source, const Mat3& r, const Vec3& t)
 {
     SurfaceMesh s;
@@ -334,14 +319,10 @@ RobustRigidResult register_surface_rigid_robust(const std::vector<double>& rest,
         for (std::size_t i = 0; i < on.size(); ++i)
             if (on[i]) surface_points.emplace_back(rest[3 * i], rest[3 * i + 1], rest[3 * i + 2]);
     }
-    const Frame model_frame = principal_frame(surface_points), cloud_frame = principal_frame(cloud.points);
+    const detail::PrincipalFrame model_frame = detail::principal_frame(surface_points), cloud_frame = detail::principal_frame(cloud.points);
     const Vec3 centre = model_frame.centre;
-    for (int signs = 0; signs < 4; ++signs) {
-        Mat3 flip = Mat3::Identity();
-        if (signs & 1) flip(0, 0) = -1, flip(2, 2) *= -1;
-        if (signs & 2) flip(1, 1) = -1, flip(2, 2) *= -1;
-        rotations.push_back({fmt::format("principal axes {}", signs), cloud_frame.axes * flip * model_frame.axes.transpose()});
-    }
+    for (int signs = 0; signs < 4; ++signs)
+        rotations.push_back({fmt::format("principal axes {}", signs), cloud_frame.axes * detail::axis_flip(signs) * model_frame.axes.transpose()});
     const double angle = options.start_angle_deg * M_PI / 180.0;
     for (int axis = 0; axis < 3; ++axis)
         for (const double sign : {1.0, -1.0})
