@@ -25,6 +25,7 @@ packages=(
   python3-matplotlib       # plots of the studies (scripts/study_surface.py) and of the HTML reports
   pybind11-dev python3-dev # the Python module (import physreg)
   python3-numpy python3-pytest # the Python module's arrays and its tests
+  python3-yaml             # report.html reads the phantom's ground-truth tissue table (demo)
   chromium                 # tests: report.html loads in a headless browser without console errors
   libgtest-dev libgmock-dev libbenchmark-dev
   calculix-ccx             # tests: an independent nonlinear FE solver to compare Newton with (optional at run time)

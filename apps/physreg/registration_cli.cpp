@@ -31,7 +31,7 @@ void add_model_options(CLI::App* sub, ModelOptions& m)
                                           "default) or liver (the liver alone, posterior surface held)");
     sub->add_option("--grid", m.grid, "Cells over the region's bounding box per image axis (default: body 54x40x26, liver 74x54x18, or one "
                                       "cell per voxel where the region spans fewer voxels)");
-    sub->add_option("--body-modulus", m.body_modulus, "Young's modulus of the gel body, Pa (region body; default 2e4)");
+    sub->add_option("--body-modulus", m.body_modulus, "Young's modulus of the gel body, Pa (region body; default 1e5)");
     sub->add_option("--k-tumour", m.k_tumour, "Parenchyma–tumour coupling stiffness k_c,s-t, N/m (default 600, paper 000)");
     sub->add_option("--k-vessel", m.k_vessel, "Parenchyma–vessel coupling stiffness k_c,s-v, N/m (default 500, paper 000)");
     sub->add_option("--support-radius", m.support_radius, "MLS support radius, element sizes (default 1.25)");

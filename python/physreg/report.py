@@ -197,6 +197,73 @@ def accuracy_section(summary):
     return out
 
 
+def read_ground_truth_moduli(path):
+    """Young's moduli (Pa) by tissue name from a phantom's ground_truth_tissues.yaml, or None."""
+    try:
+        import yaml  # Debian python3-yaml
+        table = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+        return {t["name"]: float(t["young_modulus_pa"]) for t in table["tissues"]}
+    except (OSError, ImportError, KeyError, TypeError, ValueError, AttributeError):
+        return None
+    except Exception as e:  # yaml.YAMLError: the report says so instead of failing
+        return {"error": str(e)}
+
+
+def parameters_vs_truth_section(summary, folder):
+    """The demo's estimated (or literature) model parameters beside the phantom's drawn values.
+    Only the report reads the ground truth: the registration never sees it."""
+    fitted = summary.get("fitted")
+    if not isinstance(fitted, dict) or not isinstance(fitted.get("young_modulus_pa"), dict):
+        return ""
+    truth = read_ground_truth_moduli(Path(folder) / "phantom" / "ground_truth_tissues.yaml")
+    if truth is None:
+        return ""
+    if "error" in truth:
+        return f"<h2>Parameters and the ground truth</h2><p>ground_truth_tissues.yaml could not be read: {esc(truth['error'])}</p>"
+    model = fitted["young_modulus_pa"]
+    free = set(summary.get("fit_identifiability", {}) or {})
+    at_bound = set(summary.get("fit_at_bound", []) or [])
+    ident = summary.get("fit_identifiability", {}) or {}
+
+    def status(key):
+        if key not in free:
+            return "fixed (literature)"
+        s = "estimated"
+        if key in at_bound:
+            s += ", AT A BOUND"
+        if isinstance(ident.get(key), dict) and not ident[key].get("identifiable", True):
+            s += ", not identifiable"
+        return s
+
+    rows = []
+    # (row, model key, truth tissue, estimation key)
+    for row, key, tissue, est in (("gel body E (Pa)", "body", "body", "body_young_pa"),
+                                  ("parenchyma E (Pa)", "parenchyma", "parenchyma", None),
+                                  ("tumour E (Pa)", "tumour", "lesion", "tumour_young_pa"),
+                                  ("vessel E (Pa)", "vessel", "vessel", "vessel_young_pa")):
+        if key in model and tissue in truth:
+            rows.append((row, model[key], truth[tissue], status(est) if est else "fixed (literature)"))
+    if "parenchyma" in model and "parenchyma" in truth:
+        # Under displacement loading only the ratios are observable.
+        for row, key, tissue in (("gel / parenchyma", "body", "body"), ("tumour / parenchyma", "tumour", "lesion"),
+                                 ("vessel / parenchyma", "vessel", "vessel")):
+            if key in model and tissue in truth:
+                rows.append((row, model[key] / model["parenchyma"], truth[tissue] / truth["parenchyma"], "ratio"))
+    for row, key in (("k_c,s-t (N/m)", "k_c_s_t_n_per_m"), ("k_c,s-v (N/m)", "k_c_s_v_n_per_m")):
+        if key in fitted:
+            rows.append((row, fitted[key], None, status(key)))
+    body = []
+    for row, value, drawn, how in rows:
+        factor = f"{value / drawn:.2f}×" if drawn else "–"
+        drawn_text = fmt_value(drawn) if drawn is not None else "no counterpart (the truth's organs are bonded)"
+        body.append(f"<tr><th>{esc(row)}</th><td>{esc(fmt_value(value))}</td><td>{esc(drawn_text)}</td><td>{esc(factor)}</td><td>{esc(how)}</td></tr>")
+    return ("<h2>Parameters and the ground truth</h2><p>The model's parameters (estimated on training compressions A, B, C, "
+            "or literature values) beside the values the phantom drew for its ground truth (phantom/ground_truth_tissues.yaml; "
+            "Mooney–Rivlin tetrahedra, a different model). Only this report reads them.</p>"
+            "<table><tr><th>parameter</th><th>model</th><th>ground truth</th><th>model / truth</th><th>how set</th></tr>"
+            + "".join(body) + "</table>")
+
+
 def safeguard_section(summary):
     """register-surface: what each result can be judged by without the truth, and whether the data
     decide between them (issue 32)."""
@@ -492,6 +559,7 @@ def build_report(folder, shown_as=None):
         key_value_table("Parameters", summary.get("parameters", {}) if isinstance(summary.get("parameters"), dict) else {}),
         key_value_table("Model", summary.get("model", {}) if isinstance(summary.get("model"), dict) else {}),
         accuracy_section(summary),
+        parameters_vs_truth_section(summary, folder) if command == "demo" else "",
         safeguard_section(summary),
         per_landmark_section(summary, folder),
         slices_section(summary, folder),

@@ -89,3 +89,31 @@ def test_report_opens_in_chromium_without_console_errors(registered, tmp_path):
         # Not blank: the text, tables and figures give a spread of grey levels.
         grey = shot[..., :3].mean(axis=2)
         assert grey.std() > 0.05 and (grey < 0.5).mean() > 0.01
+
+
+def test_demo_report_sets_the_parameters_beside_the_ground_truth(tmp_path):
+    # A demo folder as `physreg demo` leaves it: the summary's fitted parameters and the phantom's
+    # drawn moduli (only the report reads those).
+    import json
+    (tmp_path / "phantom").mkdir()
+    (tmp_path / "phantom" / "ground_truth_tissues.yaml").write_text(
+        "tissues:\n"
+        "  - {label: 2, name: parenchyma, young_modulus_pa: 250000.0, poisson_ratio: 0.495}\n"
+        "  - {label: 3, name: lesion, young_modulus_pa: 5000000.0, poisson_ratio: 0.495}\n"
+        "  - {label: 4, name: vessel, young_modulus_pa: 1000000.0, poisson_ratio: 0.495}\n"
+        "  - {label: 1, name: body, young_modulus_pa: 25000.0, poisson_ratio: 0.497}\n")
+    summary = {"preset": "small", "seed": 1, "methods": [],
+               "fitted": {"k_c_s_t_n_per_m": 800.0, "k_c_s_v_n_per_m": 500.0, "region": "body", "variant": "coupled",
+                          "young_modulus_pa": {"body": 1e5, "parenchyma": 2e5, "tumour": 5e6, "vessel": 1e6}},
+               "fit_at_bound": ["body_young_pa"],
+               "fit_identifiability": {"k_c_s_t_n_per_m": {"identifiable": False, "objective_change_mm_per_decade": 0.001},
+                                       "k_c_s_v_n_per_m": {"identifiable": False, "objective_change_mm_per_decade": 0.001},
+                                       "body_young_pa": {"identifiable": True, "objective_change_mm_per_decade": 0.2}}}
+    page = report.parameters_vs_truth_section(json.loads(json.dumps(summary)), tmp_path)
+    assert "<h2>Parameters and the ground truth</h2>" in page
+    # gel/parenchyma: model 0.5, truth 0.1, so the model is 5× stiffer relative to the liver.
+    row = re.search(r"<tr><th>gel / parenchyma</th><td>([^<]*)</td><td>([^<]*)</td><td>([^<]*)</td>", page)
+    assert row and row.groups() == ("0.5", "0.1", "5.00×"), row and row.groups()
+    assert re.search(r"<th>gel body E \(Pa\)</th>.*?estimated, AT A BOUND</td>", page)
+    assert re.search(r"<th>k_c,s-t \(N/m\)</th><td>800</td>.*?estimated, not identifiable</td>", page)
+    assert re.search(r"<th>parenchyma E \(Pa\)</th>.*?fixed \(literature\)</td>", page)
