@@ -288,6 +288,43 @@ bool line_hits(const LabelVolume& labels, const Vec3& start, const Vec3& d, doub
     return false;
 }
 
+// Distance along start + t·d to the first voxel satisfying `predicate` (half-voxel steps), or -1.
+double first_hit(const LabelVolume& labels, const Vec3& start, const Vec3& d, double length, const std::function<bool(std::int32_t)>& predicate)
+{
+    const double step = 0.5 * labels.geometry.spacing.minCoeff();
+    for (double t = 0; t <= length; t += step) {
+        const auto label = label_at(labels, start + t * d);
+        if (label && predicate(*label)) return t;
+    }
+    return -1.0;
+}
+
+// Whether bone lies under the skin patch a tool on the column (x, z) presses: within `reach` of the
+// column, less than `below_mm` under the body's surface. The bone's surface is held in the ground
+// truth, so a tool on it meets nodes that cannot move and the contact has no solution (the real
+// CIRS CT's ribs come within 1 mm of the skin next to the liver).
+bool bone_under_patch(const Prepared& p, double x, double z, double start_y, double length, double reach, double below_mm)
+{
+    if (p.roles.bone.empty()) return false;
+    const auto body = [](std::int32_t l) { return l != 0; };
+    const auto bone = [&](std::int32_t l) { return p.roles.bone.count(l) > 0; };
+    // Lines about 3 mm apart over the disc: a rib is 10–15 mm wide.
+    const int rings = std::max(1, static_cast<int>(std::ceil(reach / 3.0)));
+    for (int ring = 0; ring <= rings; ++ring) {
+        const double r = reach * ring / rings;
+        const int around = std::max(1, static_cast<int>(std::ceil(2 * M_PI * r / 3.0)));
+        for (int a = 0; a < around; ++a) {
+            const double angle = 2 * M_PI * a / around;
+            const Vec3 start(x + r * std::cos(angle), start_y, z + r * std::sin(angle));
+            const double skin = first_hit(p.labels, start, Vec3::UnitY(), length, body);
+            if (skin < 0) continue;
+            const double hit = first_hit(p.labels, start + skin * Vec3::UnitY(), Vec3::UnitY(), below_mm, bone);
+            if (hit >= 0) return true;
+        }
+    }
+    return false;
+}
+
 std::vector<CompressionSpec> default_compressions(const Prepared& p, const PhantomSpec& spec, const Vec3& lo, const Vec3& hi,
                                                   double image_length, bool through_gel)
 {
@@ -306,6 +343,9 @@ std::vector<CompressionSpec> default_compressions(const Prepared& p, const Phant
         // Nearest column (in 2 mm rings) through the liver. A tool pressing the liver itself needs
         // liver well beyond its depth; one pressing the gel above it, a liver worth aiming at.
         const double required = through_gel ? 30.0 : std::max(30.0, 2.5 * s.depth_mm);
+        const double reach = (s.tool.shape == IndenterShape::box ? s.tool.half_extents_mm.norm() : s.tool.radius_mm) +
+                             0.5 * spec.ground_truth_mesh.body_cell_mm;
+        int bone_columns = 0;
         bool found = false;
         for (double r = 0; r <= 60 && !found; r += 2)
             for (int a = 0; a < std::max(1, static_cast<int>(std::ceil(2 * M_PI * r / 2))) && !found; ++a) {
@@ -314,13 +354,22 @@ std::vector<CompressionSpec> default_compressions(const Prepared& p, const Phant
                 // A column through enough liver that the depth stays well inside it.
                 const double thickness = length_inside(p.labels, Vec3(x, start_y.y(), z), Vec3::UnitY(), 2 * image_length,
                                                        [&](std::int32_t l) { return p.roles.is_liver_tissue(l); });
-                if (thickness >= required) {
-                    s.x_mm = x;
-                    s.z_mm = z;
-                    found = true;
+                if (thickness < required) continue;
+                // Through the gel: the tool's patch (its radius and half a ground-truth body cell
+                // around it) must press tissue, not bone near the skin.
+                if (through_gel && bone_under_patch(p, x, z, start_y.y(), 2 * image_length, reach, s.depth_mm + 10.0)) {
+                    ++bone_columns;
+                    continue;
                 }
+                s.x_mm = x;
+                s.z_mm = z;
+                found = true;
             }
-        if (!found) fail("compression {}: no column through ≥ {:.0f} mm of liver within 60 mm of x = {:.1f}, z = {:.1f} mm", s.name, required, x0, z0);
+        if (!found)
+            fail("compression {}: no column through ≥ {:.0f} mm of liver within 60 mm of x = {:.1f}, z = {:.1f} mm{}", s.name, required, x0, z0,
+                 bone_columns ? fmt::format(" whose tool patch is free of bone ({} columns had bone within {:.0f} mm of the skin)",
+                                            bone_columns, s.depth_mm + 10.0)
+                              : std::string());
         out.push_back(s);
     }
     return out;
