@@ -2,6 +2,8 @@
 // physreg bench enrich: time per update (new tool position → every fine node at equilibrium) of the
 // high-resolution model and of the coarse-to-fine scheme, for compressions followed as sequences
 // of tool positions, each update warm-started from the previous one; TRE at the final depth.
+// physreg bench condensed: the same tool sequences with condensed contact (issue 30): the stiffness
+// factorised once at rest, the candidate skin nodes' compliance precomputed, an LCP per update.
 #include "cli_support.hpp"
 #include "progress.hpp"
 #include "registration_cli.hpp"
@@ -9,6 +11,7 @@
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
+#include "physreg/registration/condensed_contact.hpp"
 #include "physreg/registration/enrichment.hpp"
 #include "physreg/registration/estimation.hpp"
 
@@ -154,6 +157,105 @@ void add_subcommand_bench(CLI::App& app)
         if (!o->output.empty())
             write_atomically(o->output, [&](const fs::path& tmp) { std::ofstream(tmp) << report.dump(2) << "\n"; });
         if (o->json) std::cout << report.dump(2) << std::endl;
+    });
+
+    // bench condensed (issue 30).
+    struct CondensedOptions : CommonOptions {
+        std::string dataset, parameters, states = "A,B,C,D,E", held_out = "D,E", output;
+        ModelOptions model;
+        int steps = 20;
+        double margin_mm = 10.0;
+    };
+    auto co = std::make_shared<CondensedOptions>();
+    auto* cond = group->add_subcommand("condensed", "Time per update with condensed contact (issue 30): the model linearised and factorised "
+                                                    "once at rest, the compliance of the skin nodes the tools can reach precomputed, a "
+                                                    "contact problem on those nodes alone per update; TRE at the final depth");
+    cond->add_option("--dataset", co->dataset, "Phantom dataset")->required();
+    cond->add_option("--parameters", co->parameters, "Parameter file (physreg estimate)");
+    add_model_options(cond, co->model);
+    cond->add_option("--states", co->states, "Compressions to follow (default A,B,C,D,E); all their tool paths define the candidate nodes");
+    cond->add_option("--held-out", co->held_out, "Which of them are held out (default D,E): their TRE is reported apart");
+    cond->add_option("--steps", co->steps, "Tool positions from first contact to the final depth (default 20)");
+    cond->add_option("--candidate-margin", co->margin_mm, "Candidates: surface nodes within the tool's reach + this of a path, mm (default 10)");
+    cond->add_option("-o,--output", co->output, "JSON report (also printed with --json)");
+    cond->add_flag("--json", co->json, "Print the report on stdout");
+    cond->callback([co] {
+        if (co->steps < 1) fail("--steps must be ≥ 1 (got {})", co->steps);
+        if (!(co->margin_mm >= 0)) fail("--candidate-margin must be ≥ 0 mm (got {})", co->margin_mm);
+        if (!co->output.empty()) check_output_path(co->output, "--output");
+        const LoadedModel loaded = load_model(co->dataset, co->parameters, co->model);
+        const auto cases = compression_cases(loaded.dataset, split_names(co->states, "--states"));
+        const auto held_names = split_names(co->held_out, "--held-out");
+        const std::set<std::string> held(held_names.begin(), held_names.end());
+        std::vector<Indenter> tools;
+        for (const auto& c : cases) tools.push_back(c.tool);
+        std::vector<Vec3> around;
+        for (const auto& l : loaded.rest_landmarks) around.push_back(l.position);
+        // Every node within two cells of a landmark: a superset of the nodes its interpolation reads.
+        const auto query = nodes_near(loaded.model.mesh, around, 2.0 * loaded.model.cell_size_mm.maxCoeff());
+        CondensedContactOptions options;
+        options.candidate_margin_mm = co->margin_mm;
+        logger()->info("bench condensed: factorising the stiffness at rest and the candidates' compliance");
+        CondensedContactModel condensed(loaded.model, tools, query, options);
+        const auto& pre = condensed.precomputation();
+        json report;
+        report["what"] = "time per update with condensed contact: new tool position → contact forces → the landmarks' nodes";
+        report["threads"] = omp_get_max_threads();
+        report["model"] = {{"nodes", loaded.model.mesh.node_count()}, {"hexahedra", loaded.model.mesh.cell_count()},
+                           {"variant", to_string(loaded.model.parameters.variant)}, {"region", to_string(loaded.model.parameters.region)},
+                           {"law", "the model's Neo-Hookean tangent at rest (small-strain linear elasticity)"}};
+        report["precomputation"] = {{"dofs", pre.dofs}, {"candidate_nodes", pre.candidate_nodes}, {"query_nodes", pre.query_nodes},
+                                    {"assembly_s", pre.assembly_s}, {"factorisation_s", pre.factorisation_s},
+                                    {"compliance_s", pre.compliance_s}, {"compliance_mb", double(pre.compliance_bytes) / 1e6}};
+        report["targets"] = {{"high_resolution_ms", 100.0}, {"coarse_to_fine_ms", 10.0}};
+        ProgressDisplay bar("bench condensed");
+        std::vector<double> all_ms, all_contact, all_recovery;
+        std::vector<TreReport> tre_all, tre_held, tre_train;
+        for (std::size_t c = 0; c < cases.size(); ++c) {
+            condensed.reset();
+            const Vec3 a = cases[c].tool.path.front(), b = cases[c].tool.path.back();
+            std::vector<double> ms, contact, recovery;
+            CondensedContactModel::Update up;
+            for (int s = 1; s <= co->steps; ++s) {
+                up = condensed.move_to(cases[c].tool, a + (double(s) / co->steps) * (b - a));
+                ms.push_back(up.contact_ms + up.recovery_ms);
+                contact.push_back(up.contact_ms);
+                recovery.push_back(up.recovery_ms);
+                bar.update(double(c * co->steps + s) / double(cases.size() * co->steps), fmt::format("{} step {}", cases[c].name, s));
+            }
+            std::vector<double> u(3 * loaded.model.mesh.node_count(), 0.0);
+            for (std::size_t i = 0; i < query.size(); ++i)
+                for (int d = 0; d < 3; ++d)
+                    u[3 * static_cast<std::size_t>(query[i]) + static_cast<std::size_t>(d)] = condensed.query_displacement_mm()[3 * i + static_cast<std::size_t>(d)];
+            const LandmarkSet moved = move_landmarks(loaded.model, u, loaded.rest_landmarks);
+            tre_all.push_back(compute_tre(moved, cases[c].truth, cases[c].name));
+            (held.count(cases[c].name) ? tre_held : tre_train).push_back(tre_all.back());
+            const TreReport at_rest = compute_tre(loaded.rest_landmarks, cases[c].truth, cases[c].name + " at rest");
+            all_ms.insert(all_ms.end(), ms.begin(), ms.end());
+            all_contact.insert(all_contact.end(), contact.begin(), contact.end());
+            all_recovery.insert(all_recovery.end(), recovery.begin(), recovery.end());
+            report["compressions"][cases[c].name] = {
+                {"depth_mm", (b - a).norm()}, {"held_out", held.count(cases[c].name) > 0},
+                {"ms_per_update", {{"mean", mean_of(ms)}, {"max", *std::max_element(ms.begin(), ms.end())},
+                                   {"contact", mean_of(contact)}, {"recovery", mean_of(recovery)}}},
+                {"final", {{"nodes_in_contact", up.active_nodes}, {"lcp_nodes", up.lcp_nodes}, {"max_penetration_mm", up.max_penetration_mm},
+                           {"tool_force_n", up.total_force_n}}},
+                {"tre", json::parse(tre_stats_json(tre_all.back()))},
+                {"tre_landmarks_at_rest", json::parse(tre_stats_json(at_rest))}};
+        }
+        bar.finish();
+        report["summary"] = {{"ms_per_update", mean_of(all_ms)}, {"contact_ms", mean_of(all_contact)}, {"recovery_ms", mean_of(all_recovery)},
+                             {"tre", json::parse(tre_stats_json(pool_tre(tre_all)))},
+                             {"training", {{"states", tre_train.size()}, {"tre", json::parse(tre_stats_json(pool_tre(tre_train)))}}},
+                             {"held_out", {{"states", tre_held.size()}, {"tre", json::parse(tre_stats_json(pool_tre(tre_held)))}}}};
+        std::cerr << fmt::format("bench condensed ({} threads): precomputation {:.1f} s (factor {:.1f} s, {} candidate nodes {:.1f} s); "
+                                 "{:.2f} ms/update (contact {:.2f}, recovery {:.3f}); TRE at the final depth: training {:.3f} mm, held-out {:.3f} mm\n",
+                                 omp_get_max_threads(), pre.assembly_s + pre.factorisation_s + pre.compliance_s, pre.factorisation_s,
+                                 pre.candidate_nodes, pre.compliance_s, mean_of(all_ms), mean_of(all_contact), mean_of(all_recovery),
+                                 pool_tre(tre_train).all.mean_mm, pool_tre(tre_held).all.mean_mm);
+        if (!co->output.empty())
+            write_atomically(co->output, [&](const fs::path& tmp) { std::ofstream(tmp) << report.dump(2) << "\n"; });
+        if (co->json) std::cout << report.dump(2) << std::endl;
     });
 }
 

@@ -174,6 +174,20 @@ LinearSolveStats SymmetricSolver::solve_factored(const Eigen::VectorXd& b, Eigen
     return stats;
 }
 
+LinearSolveStats SymmetricSolver::solve_factored(const Eigen::MatrixXd& b, Eigen::MatrixXd& x)
+{
+    if (!m_impl->factored) fail("linear solver: no factorisation to solve with");
+    if (b.rows() != m_impl->pattern_rows) fail("linear solver: right-hand sides of {} rows for a factor of {}", b.rows(), m_impl->pattern_rows);
+    LinearSolveStats stats;
+    const auto start = std::chrono::steady_clock::now();
+    {
+        const SingleThreadedBlas one_thread;
+        x = m_impl->factor.solve(b);
+    }
+    stats.solve_s = seconds_since(start);
+    return stats;
+}
+
 bool SymmetricSolver::has_factor() const
 {
     return m_impl->factored;

@@ -326,11 +326,13 @@ LandmarkSet pick_landmarks(const LabelVolume& labels, const LabelRoles& roles, c
                     candidates.emplace_back(-depth, p);
                 }
         std::stable_sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+        // 15 mm apart; in a small organ (a prostate-sized gland) closer, down to 6 mm, rather than fail.
         int deep = 0;
-        for (const auto& [score, p] : candidates)
-            if (static_cast<int>(internal.size()) < wanted && far_from(p, internal, 15.0)) {
-                internal.push_back({fmt::format("parenchyma_point{}", ++deep), p, LandmarkType::unspecified});
-            }
+        for (const double separation : {15.0, 10.0, 6.0})
+            for (const auto& [score, p] : candidates)
+                if (static_cast<int>(internal.size()) < wanted && far_from(p, internal, separation)) {
+                    internal.push_back({fmt::format("parenchyma_point{}", ++deep), p, LandmarkType::unspecified});
+                }
     }
     if (static_cast<int>(internal.size()) < wanted)
         fail("landmarks: only {} of {} internal landmarks found", internal.size(), wanted);

@@ -65,6 +65,8 @@ public:
     /// Solves with the factor of the last factorised matrix (modified Newton: a stale tangent).
     /// Throws Error when there is none.
     LinearSolveStats solve_factored(const Eigen::VectorXd& b, Eigen::VectorXd& x);
+    /// The same for several right-hand sides at once (the columns of b; BLAS-3 in CHOLMOD).
+    LinearSolveStats solve_factored(const Eigen::MatrixXd& b, Eigen::MatrixXd& x);
     bool has_factor() const;
     /// Forget the factor (the next pcg-factor solve refactors).
     void invalidate();
