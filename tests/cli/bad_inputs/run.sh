@@ -228,6 +228,8 @@ case_ enrich-apply-flipped "enrich apply" "database with one flipped byte" "chec
 case_ enrich-apply-truncated "enrich apply" "truncated database" "truncated.phe" 1 "$o" -- enrich apply --database "$W/truncated.phe" --dataset "$ph" --grid 6x5x3 --state D -o "$o"
 case_ enrich-apply-other-mesh "enrich apply" "database built for another mesh" "another fine mesh" 1 "$o" -- enrich apply --database "$W/db.phe" --dataset "$ph" --grid 8x6x4 --state D -o "$o"
 case_ bench-enrich-database "bench enrich" "truncated database" "truncated.phe" 1 "$o.json" -- bench enrich --dataset "$ph" --grid 6x5x3 --database "$W/truncated.phe" --states D -o "$o.json"
+case_ bench-condensed-steps "bench condensed" "--steps 0" "--steps must be" 1 "$o.json" -- bench condensed --dataset "$ph" --grid 6x5x3 --steps 0 -o "$o.json"
+case_ bench-condensed-state "bench condensed" "a state that is not a tool compression" "insufflation" 1 "$o.json" -- bench condensed --dataset "$ph" --grid 6x5x3 --states insufflation -o "$o.json"
 case_ demo-readonly demo "read-only output folder" "ro" 1 "$W/ro/demo" readonly -- demo --quick -o "$W/ro/demo"
 case_ demo-sigterm demo "SIGTERM mid-run" "interrupted by SIGTERM" 143 "$o" signal:TERM:5 -- demo --quick -o "$o"
 case_ cli-unknown-option "(any)" "unknown option" "--frobnicate" 109 "" -- mesh "$labels" -o "$o.vtu" --frobnicate
