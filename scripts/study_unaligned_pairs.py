@@ -191,6 +191,7 @@ for seed in [int(s) for s in args.seeds.split(",")]:
               f"initial {methods.get('initial_alignment', {}).get('tre_mm', float('nan')):.2f}, "
               f"biomechanical {bio.get('tre_mm', float('nan')):.2f}, rigid labels {rigid.get('tre_mm', float('nan')):.2f}, "
               f"demons labels {methods.get('demons_labels', {}).get('tre_mm', float('nan')):.2f} mm ({register_s:.0f} s)", flush=True)
-json.dump({"cases": rows, "cycles": args.cycles}, open(os.path.join(args.work, "study.json"), "w"), indent=1)
+        # Written after every case: a long run stopped half-way keeps what it measured.
+        json.dump({"cases": rows, "cycles": args.cycles}, open(os.path.join(args.work, "study.json"), "w"), indent=1)
 worse = [r["case"] for r in rows if r["methods"].get("biomechanical", {}).get("tre_mm", 1e9) > r["methods"].get("rigid_labels", {}).get("tre_mm", -1)]
 print(f"biomechanical TRE ≤ rigid labels on {len(rows) - len(worse)} of {len(rows)} pairs" + (f"; worse on {', '.join(worse)}" if worse else ""))
