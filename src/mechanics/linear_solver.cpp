@@ -160,32 +160,33 @@ LinearSolveStats SymmetricSolver::factorise(const SparseMatrix& k)
     return stats;
 }
 
-LinearSolveStats SymmetricSolver::solve_factored(const Eigen::VectorXd& b, Eigen::VectorXd& x)
+namespace {
+// One or several right-hand sides with the kept factor (on one BLAS thread, as the factorisation).
+template <class Rhs, class Solution>
+LinearSolveStats solve_with_factor(const Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower>& factor, bool factored, Eigen::Index rows,
+                                   const Rhs& b, Solution& x)
 {
-    if (!m_impl->factored) fail("linear solver: no factorisation to solve with");
-    if (b.size() != m_impl->pattern_rows) fail("linear solver: right-hand side of {} rows for a factor of {}", b.size(), m_impl->pattern_rows);
+    if (!factored) fail("linear solver: no factorisation to solve with");
+    if (b.rows() != rows) fail("linear solver: right-hand side of {} rows for a factor of {}", b.rows(), rows);
     LinearSolveStats stats;
     const auto start = std::chrono::steady_clock::now();
     {
         const SingleThreadedBlas one_thread;
-        x = m_impl->factor.solve(b);
+        x = factor.solve(b);
     }
     stats.solve_s = seconds_since(start);
     return stats;
 }
+} // namespace
+
+LinearSolveStats SymmetricSolver::solve_factored(const Eigen::VectorXd& b, Eigen::VectorXd& x)
+{
+    return solve_with_factor(m_impl->factor, m_impl->factored, m_impl->pattern_rows, b, x);
+}
 
 LinearSolveStats SymmetricSolver::solve_factored(const Eigen::MatrixXd& b, Eigen::MatrixXd& x)
 {
-    if (!m_impl->factored) fail("linear solver: no factorisation to solve with");
-    if (b.rows() != m_impl->pattern_rows) fail("linear solver: right-hand sides of {} rows for a factor of {}", b.rows(), m_impl->pattern_rows);
-    LinearSolveStats stats;
-    const auto start = std::chrono::steady_clock::now();
-    {
-        const SingleThreadedBlas one_thread;
-        x = m_impl->factor.solve(b);
-    }
-    stats.solve_s = seconds_since(start);
-    return stats;
+    return solve_with_factor(m_impl->factor, m_impl->factored, m_impl->pattern_rows, b, x);
 }
 
 bool SymmetricSolver::has_factor() const
