@@ -142,6 +142,7 @@ CondensedContactModel::CondensedContactModel(const LiverModel& model, const std:
         }
     }
     m_pre.compliance_s = seconds_since(t0);
+    m_least_compliance = 1e-12 * m_wcc.diagonal().maxCoeff();
     m_pre.dofs = dofs;
     m_pre.candidate_nodes = m_candidates.size();
     m_pre.query_nodes = m_query.size();
@@ -192,9 +193,14 @@ CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& too
 
     std::vector<std::size_t> set; // the LCP's candidates
     for (int linearisation = 0; linearisation < m_options.normal_updates; ++linearisation) {
+        // A node that cannot move along the tool's normal (a support holds that direction) has no
+        // compliance there and stays out of the LCP; if the tool reaches it, the penetration check
+        // below says so.
         std::set<std::size_t> chosen;
-        for (std::size_t i = 0; i < c; ++i)
-            if (gap[i] < m_options.active_gap_mm || m_lambda[i] > 0) chosen.insert(i);
+        for (std::size_t i = 0; i < c; ++i) {
+            const double own = normal[i].dot(m_wcc.block<3, 3>(static_cast<Eigen::Index>(3 * i), static_cast<Eigen::Index>(3 * i)) * normal[i]);
+            if ((gap[i] < m_options.active_gap_mm || m_lambda[i] > 0) && own > m_least_compliance) chosen.insert(i);
+        }
         set.assign(chosen.begin(), chosen.end());
         const auto m = static_cast<Eigen::Index>(set.size());
         // D = Nᵀ W N and q on the set, linearised at the current displacement.

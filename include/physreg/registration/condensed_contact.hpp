@@ -82,6 +82,7 @@ private:
     Eigen::MatrixXd m_wcc; ///< compliance at candidate dofs (3c × 3c), mm/N
     Eigen::MatrixXd m_wqc; ///< query dofs × candidate dofs (3q × 3c), mm/N
     Eigen::VectorXd m_force; ///< 3c: the last contact forces (N)
+    double m_least_compliance = 0.0; ///< below this a candidate cannot move along a normal (held), mm/N
     std::vector<double> m_lambda; ///< per candidate: last λ (warm start)
     std::vector<double> m_query_u;
     CondensedPrecomputation m_pre;
