@@ -174,7 +174,7 @@ def accuracy_section(summary):
             d = extra.get("dice_mean")
             cells += f"<td class='num'>{'–' if d is None else f'{d:.3f}'}</td>"
         if extra.get("ms_per_update") is not None:
-            cells += f"<td class='num'>{extra['ms_per_update']:.1f} ms/update</td>"
+            cells += f"<td class='num'>{extra['ms_per_update']:.3g} ms/update</td>"
         elif extra.get("seconds") is not None:
             cells += f"<td class='num'>{extra['seconds']:.2f} s</td>"
         else:
