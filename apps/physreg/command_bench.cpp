@@ -223,11 +223,7 @@ void add_subcommand_bench(CLI::App& app)
                 recovery.push_back(up.recovery_ms);
                 bar.update(double(c * co->steps + s) / double(cases.size() * co->steps), fmt::format("{} step {}", cases[c].name, s));
             }
-            std::vector<double> u(3 * loaded.model.mesh.node_count(), 0.0);
-            for (std::size_t i = 0; i < query.size(); ++i)
-                for (int d = 0; d < 3; ++d)
-                    u[3 * static_cast<std::size_t>(query[i]) + static_cast<std::size_t>(d)] = condensed.query_displacement_mm()[3 * i + static_cast<std::size_t>(d)];
-            const LandmarkSet moved = move_landmarks(loaded.model, u, loaded.rest_landmarks);
+            const LandmarkSet moved = move_landmarks(loaded.model, condensed.query_field_mm(), loaded.rest_landmarks);
             tre_all.push_back(compute_tre(moved, cases[c].truth, cases[c].name));
             (held.count(cases[c].name) ? tre_held : tre_train).push_back(tre_all.back());
             const TreReport at_rest = compute_tre(loaded.rest_landmarks, cases[c].truth, cases[c].name + " at rest");

@@ -349,10 +349,7 @@ void add_subcommand_demo(CLI::App& app)
                 const auto up = condensed.move_to(vc.tool, a + (b - a) * double(s) / double(track_steps));
                 if (held_out) methods[5].ms.push_back(up.contact_ms + up.recovery_ms);
             }
-            std::vector<double> condensed_u(3 * fine.mesh.node_count(), 0.0);
-            for (std::size_t i = 0; i < query.size(); ++i)
-                for (std::size_t k = 0; k < 3; ++k) condensed_u[3 * static_cast<std::size_t>(query[i]) + k] = condensed.query_displacement_mm()[3 * i + k];
-            record(methods[5], move_landmarks(fine, condensed_u, rest_landmarks));
+            record(methods[5], move_landmarks(fine, condensed.query_field_mm(), rest_landmarks));
             if (!held_out) continue; // timings, outputs and figures: the held-out compressions
             methods[1].ms.insert(methods[1].ms.end(), run.high_resolution_ms.begin(), run.high_resolution_ms.end());
             methods[2].ms.insert(methods[2].ms.end(), run.coarse_to_fine_ms.begin(), run.coarse_to_fine_ms.end());

@@ -306,6 +306,14 @@ void CondensedContactModel::reset()
     std::fill(m_query_u.begin(), m_query_u.end(), 0.0);
 }
 
+std::vector<double> CondensedContactModel::query_field_mm() const
+{
+    std::vector<double> u(3 * m_model.mesh.node_count(), 0.0);
+    for (std::size_t i = 0; i < m_query.size(); ++i)
+        for (std::size_t d = 0; d < 3; ++d) u[3 * static_cast<std::size_t>(m_query[i]) + d] = m_query_u[3 * i + d];
+    return u;
+}
+
 std::vector<double> CondensedContactModel::full_displacement_mm() const
 {
     const std::size_t dofs = m_factor->constrained.size();

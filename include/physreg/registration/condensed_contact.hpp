@@ -66,6 +66,9 @@ public:
     void reset();
     /// 3 per query node (the order given), mm, after the last update.
     const std::vector<double>& query_displacement_mm() const { return m_query_u; }
+    /// Every node's displacement (3 per node, mm) with only the query nodes filled (zero elsewhere):
+    /// enough for anything that reads the query nodes alone, such as the landmarks' interpolation.
+    std::vector<double> query_field_mm() const;
     /// Every node's displacement (3 per node, mm): one solve with the factor.
     std::vector<double> full_displacement_mm() const;
 
