@@ -161,7 +161,7 @@ void add_subcommand_bench(CLI::App& app)
 
     // bench condensed (issue 30).
     struct CondensedOptions : CommonOptions {
-        std::string dataset, parameters, states = "A,B,C,D,E", held_out = "D,E", output;
+        std::string dataset, parameters, states = "A,B,C,D,E", held_out = "D,E", output, nonlinear = "never";
         ModelOptions model;
         int steps = 20;
         double margin_mm = 10.0;
@@ -176,12 +176,17 @@ void add_subcommand_bench(CLI::App& app)
     cond->add_option("--states", co->states, "Compressions to follow (default A,B,C,D,E); all their tool paths define the candidate nodes");
     cond->add_option("--held-out", co->held_out, "Which of them are held out (default D,E): their TRE is reported apart");
     cond->add_option("--steps", co->steps, "Tool positions from first contact to the final depth (default 20)");
+    cond->add_option("--nonlinear", co->nonlinear,
+                     "The model's own Neo-Hookean law at each compression's final depth: never (default: the linear law alone) or "
+                     "relaxation (dynamic relaxation started from the condensed field, and from rest for comparison; the TRE is then "
+                     "the nonlinear one)");
     cond->add_option("--candidate-margin", co->margin_mm, "Candidates: surface nodes within the tool's reach + this of a path, mm (default 10)");
     cond->add_option("-o,--output", co->output, "JSON report (also printed with --json)");
     cond->add_flag("--json", co->json, "Print the report on stdout");
     cond->callback([co] {
         if (co->steps < 1) fail("--steps must be ≥ 1 (got {})", co->steps);
         if (!(co->margin_mm >= 0)) fail("--candidate-margin must be ≥ 0 mm (got {})", co->margin_mm);
+        if (co->nonlinear != "never" && co->nonlinear != "relaxation") fail("--nonlinear must be never or relaxation (got '{}')", co->nonlinear);
         if (!co->output.empty()) check_output_path(co->output, "--output");
         const LoadedModel loaded = load_model(co->dataset, co->parameters, co->model);
         const auto cases = compression_cases(loaded.dataset, split_names(co->states, "--states"));
@@ -209,23 +214,46 @@ void add_subcommand_bench(CLI::App& app)
                                     {"compliance_s", pre.compliance_s}, {"compliance_mb", double(pre.compliance_bytes) / 1e6}};
         report["targets"] = {{"high_resolution_ms", 100.0}, {"coarse_to_fine_ms", 10.0}};
         ProgressDisplay bar("bench condensed");
-        std::vector<double> all_ms, all_contact, all_recovery;
-        std::vector<TreReport> tre_all, tre_held, tre_train;
+        std::vector<double> all_ms, all_contact, all_recovery, relax_ms;
+        std::vector<TreReport> tre_all, tre_held, tre_train, linear_all, linear_held, linear_train;
         for (std::size_t c = 0; c < cases.size(); ++c) {
             condensed.reset();
             const Vec3 a = cases[c].tool.path.front(), b = cases[c].tool.path.back();
             std::vector<double> ms, contact, recovery;
             CondensedContactModel::Update up;
+            std::vector<double> state_relax_ms;
+            LandmarkSet linear_moved;
             for (int s = 1; s <= co->steps; ++s) {
-                up = condensed.move_to(cases[c].tool, a + (double(s) / co->steps) * (b - a));
+                const Vec3 at = a + (double(s) / co->steps) * (b - a);
+                up = condensed.move_to(cases[c].tool, at);
                 ms.push_back(up.contact_ms + up.recovery_ms);
                 contact.push_back(up.contact_ms);
                 recovery.push_back(up.recovery_ms);
+                if (s == co->steps) linear_moved = move_landmarks(loaded.model, condensed.query_field_mm(), loaded.rest_landmarks);
                 bar.update(double(c * co->steps + s) / double(cases.size() * co->steps), fmt::format("{} step {}", cases[c].name, s));
             }
-            const LandmarkSet moved = move_landmarks(loaded.model, condensed.query_field_mm(), loaded.rest_landmarks);
+            LandmarkSet moved = move_landmarks(loaded.model, condensed.query_field_mm(), loaded.rest_landmarks);
+            json relaxation;
+            if (co->nonlinear == "relaxation") {
+                // The model's own law by dynamic relaxation, started from the condensed field, and
+                // (for the ratio, in the same run) from rest.
+                PredictionOptions warm;
+                warm.initial_displacement_mm = condensed.full_displacement_mm();
+                const auto t0 = std::chrono::steady_clock::now();
+                const CompressionPrediction from_condensed = predict_compression(loaded.model, cases[c].tool, loaded.rest_landmarks, warm, cases[c].name);
+                const double warm_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+                const CompressionPrediction from_rest = predict_compression(loaded.model, cases[c].tool, loaded.rest_landmarks, {}, cases[c].name);
+                moved = from_condensed.landmarks;
+                state_relax_ms.push_back(1e3 * warm_s);
+                relaxation = {{"from_condensed", {{"iterations", from_condensed.iterations}, {"s", warm_s}}},
+                              {"from_rest", {{"iterations", from_rest.iterations}, {"s", from_rest.seconds},
+                                             {"tre", json::parse(tre_stats_json(compute_tre(from_rest.landmarks, cases[c].truth, cases[c].name)))}}}};
+            }
             tre_all.push_back(compute_tre(moved, cases[c].truth, cases[c].name));
             (held.count(cases[c].name) ? tre_held : tre_train).push_back(tre_all.back());
+            linear_all.push_back(compute_tre(linear_moved, cases[c].truth, cases[c].name));
+            (held.count(cases[c].name) ? linear_held : linear_train).push_back(linear_all.back());
+            relax_ms.insert(relax_ms.end(), state_relax_ms.begin(), state_relax_ms.end());
             const TreReport at_rest = compute_tre(loaded.rest_landmarks, cases[c].truth, cases[c].name + " at rest");
             all_ms.insert(all_ms.end(), ms.begin(), ms.end());
             all_contact.insert(all_contact.end(), contact.begin(), contact.end());
@@ -237,18 +265,26 @@ void add_subcommand_bench(CLI::App& app)
                 {"final", {{"nodes_in_contact", up.active_nodes}, {"lcp_nodes", up.lcp_nodes}, {"max_penetration_mm", up.max_penetration_mm},
                            {"tool_force_n", up.total_force_n}}},
                 {"tre", json::parse(tre_stats_json(tre_all.back()))},
+                {"tre_linear_update", json::parse(tre_stats_json(linear_all.back()))},
                 {"tre_landmarks_at_rest", json::parse(tre_stats_json(at_rest))}};
+            if (!relaxation.is_null()) report["compressions"][cases[c].name]["relaxation"] = relaxation;
         }
         bar.finish();
         report["summary"] = {{"ms_per_update", mean_of(all_ms)}, {"contact_ms", mean_of(all_contact)}, {"recovery_ms", mean_of(all_recovery)},
                              {"tre", json::parse(tre_stats_json(pool_tre(tre_all)))},
                              {"training", {{"states", tre_train.size()}, {"tre", json::parse(tre_stats_json(pool_tre(tre_train)))}}},
-                             {"held_out", {{"states", tre_held.size()}, {"tre", json::parse(tre_stats_json(pool_tre(tre_held)))}}}};
+                             {"held_out", {{"states", tre_held.size()}, {"tre", json::parse(tre_stats_json(pool_tre(tre_held)))}}},
+                             {"nonlinear", co->nonlinear},
+                             {"linear_update_tre", {{"training", json::parse(tre_stats_json(pool_tre(linear_train)))},
+                                                    {"held_out", json::parse(tre_stats_json(pool_tre(linear_held)))}}},
+                             {"relaxation_from_condensed_ms", relax_ms.empty() ? json(nullptr) : json(mean_of(relax_ms))}};
         std::cerr << fmt::format("bench condensed ({} threads): precomputation {:.1f} s (factor {:.1f} s, {} candidate nodes {:.1f} s); "
-                                 "{:.2f} ms/update (contact {:.2f}, recovery {:.3f}); TRE at the final depth: training {:.3f} mm, held-out {:.3f} mm\n",
+                                 "{:.2f} ms/update (contact {:.2f}, recovery {:.3f}); TRE at the final depth: training {:.3f} mm, held-out {:.3f} mm "
+                                 "(linear update alone: {:.3f}, {:.3f} mm; nonlinear {}: {:.0f} ms per final state)\n",
                                  omp_get_max_threads(), pre.assembly_s + pre.factorisation_s + pre.compliance_s, pre.factorisation_s,
                                  pre.candidate_nodes, pre.compliance_s, mean_of(all_ms), mean_of(all_contact), mean_of(all_recovery),
-                                 pool_tre(tre_train).all.mean_mm, pool_tre(tre_held).all.mean_mm);
+                                 pool_tre(tre_train).all.mean_mm, pool_tre(tre_held).all.mean_mm, pool_tre(linear_train).all.mean_mm,
+                                 pool_tre(linear_held).all.mean_mm, co->nonlinear, relax_ms.empty() ? 0.0 : mean_of(relax_ms));
         if (!co->output.empty())
             write_atomically(co->output, [&](const fs::path& tmp) { std::ofstream(tmp) << report.dump(2) << "\n"; });
         if (co->json) std::cout << report.dump(2) << std::endl;
