@@ -12,7 +12,7 @@
 //      [--tolerance 1e-4 (Newton policies: ‖r‖∞ ≤ tol × largest force)] [--hold-radius-mm 25]
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/io/mesh_io.hpp"
-#include "physreg/mechanics/backward_euler.hpp"
+#include "physreg/mechanics/implicit/backward_euler.hpp"
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>

@@ -16,7 +16,7 @@
 #include "physreg/core/error.hpp"
 #include "physreg/io/image_io.hpp"
 #include "physreg/phantom/dataset.hpp"
-#include "physreg/registration/liver_model.hpp"
+#include "physreg/registration/compression/liver_model.hpp"
 
 #include <Eigen/Dense>
 #include <nlohmann/json.hpp>

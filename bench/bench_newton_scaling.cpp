@@ -9,7 +9,7 @@
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/figures/canvas.hpp"
 #include "physreg/io/png.hpp"
-#include "physreg/mechanics/newton_solver.hpp"
+#include "physreg/mechanics/implicit/newton_solver.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 
 #include <fmt/format.h>

@@ -4,8 +4,8 @@
 // double precision; and the time and iterations to reach equilibrium for a 10 mm indentation of
 // the 74×18×54 block by dynamic relaxation.
 // Run: build/bin/bench_tled --benchmark_out=bench/results/bench_tled.json --benchmark_out_format=json
-#include "physreg/mechanics/stiffness_assembly.hpp"
-#include "physreg/mechanics/tled_solver.hpp"
+#include "physreg/mechanics/implicit/stiffness_assembly.hpp"
+#include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 
 #include <benchmark/benchmark.h>

@@ -2,7 +2,7 @@
 // Configuration readers: tissue tables (YAML or JSON) and simulation cases (YAML). The first byte
 // picks one. Unknown keys, wrong types and impossible values must all end in physreg::Error.
 #include "fuzz_support.hpp"
-#include "physreg/mechanics/simulation.hpp"
+#include "physreg/mechanics/simulation/simulation.hpp"
 #include "physreg/model/tissue_table.hpp"
 
 #include <cmath>

@@ -2,7 +2,7 @@
 // The enrichment database reader (physreg's own binary format with per-block checksums). An
 // accepted database must pass EnrichmentDatabase::validate.
 #include "fuzz_support.hpp"
-#include "physreg/registration/enrichment.hpp"
+#include "physreg/registration/compression/enrichment.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size)
 {

@@ -11,9 +11,9 @@
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
-#include "physreg/registration/condensed_contact.hpp"
-#include "physreg/registration/enrichment.hpp"
-#include "physreg/registration/estimation.hpp"
+#include "physreg/registration/compression/condensed_contact.hpp"
+#include "physreg/registration/compression/enrichment.hpp"
+#include "physreg/registration/compression/estimation.hpp"
 
 #include <omp.h>
 

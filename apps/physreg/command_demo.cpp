@@ -19,7 +19,7 @@
 #include "physreg/mesh/point_location.hpp"
 #include "physreg/mesh/surface_extraction.hpp"
 #include "physreg/mesh/tet_split.hpp"
-#include "physreg/mechanics/simulation.hpp"
+#include "physreg/mechanics/simulation/simulation.hpp"
 #include "physreg/phantom/synthetic_phantom.hpp"
 #include "progress.hpp"
 
@@ -29,9 +29,9 @@
 #include "physreg/figures/slice_figure.hpp"
 #include "physreg/io/png.hpp"
 #include "physreg/io/vtu.hpp"
-#include "physreg/registration/condensed_contact.hpp"
-#include "physreg/registration/enrichment.hpp"
-#include "physreg/registration/estimation.hpp"
+#include "physreg/registration/compression/condensed_contact.hpp"
+#include "physreg/registration/compression/enrichment.hpp"
+#include "physreg/registration/compression/estimation.hpp"
 #include "registration_cli.hpp"
 
 #include <numeric>

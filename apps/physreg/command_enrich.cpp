@@ -13,8 +13,8 @@
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/io/vtu.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
-#include "physreg/registration/enrichment.hpp"
-#include "physreg/registration/estimation.hpp"
+#include "physreg/registration/compression/enrichment.hpp"
+#include "physreg/registration/compression/estimation.hpp"
 
 #include <mpi.h>
 

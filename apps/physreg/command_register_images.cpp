@@ -22,10 +22,10 @@
 #include "physreg/mesh/point_location.hpp"
 #include "physreg/mesh/tetrahedral_meshing.hpp"
 #include "physreg/phantom/dataset.hpp"
-#include "physreg/registration/image_baselines.hpp"
-#include "physreg/registration/segmentation_alignment.hpp"
-#include "physreg/registration/segmentation_registration.hpp"
-#include "physreg/registration/surface_model.hpp"
+#include "physreg/registration/images/image_baselines.hpp"
+#include "physreg/registration/images/segmentation_alignment.hpp"
+#include "physreg/registration/images/segmentation_registration.hpp"
+#include "physreg/registration/surface/surface_model.hpp"
 
 #include <chrono>
 #include <fstream>

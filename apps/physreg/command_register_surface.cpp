@@ -19,12 +19,12 @@
 #include "physreg/mesh/point_location.hpp"
 #include "physreg/phantom/dataset.hpp"
 #include "physreg/phantom/landmark_picking.hpp"
-#include "physreg/mechanics/embedded_beams.hpp"
-#include "physreg/mechanics/membrane.hpp"
-#include "physreg/mechanics/stiffness_assembly.hpp"
-#include "physreg/registration/surface_adjoint.hpp"
-#include "physreg/registration/surface_model.hpp"
-#include "physreg/registration/surface_registration.hpp"
+#include "physreg/mechanics/elements/embedded_beams.hpp"
+#include "physreg/mechanics/elements/membrane.hpp"
+#include "physreg/mechanics/implicit/stiffness_assembly.hpp"
+#include "physreg/registration/surface/surface_adjoint.hpp"
+#include "physreg/registration/surface/surface_model.hpp"
+#include "physreg/registration/surface/surface_registration.hpp"
 
 #include <chrono>
 #include <fstream>

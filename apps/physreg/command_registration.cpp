@@ -16,7 +16,7 @@
 #include "physreg/io/vtu.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 #include "physreg/phantom/dataset.hpp"
-#include "physreg/registration/estimation.hpp"
+#include "physreg/registration/compression/estimation.hpp"
 
 #include <fstream>
 #include <iostream>

@@ -6,6 +6,7 @@
 #include "physreg/core/interrupt.hpp"
 
 #include <filesystem>
+#include <string>
 #include <iostream>
 
 int main(int argc, char** argv)
@@ -27,7 +28,11 @@ int main(int argc, char** argv)
         return 1;
     } catch (const physreg::Error& e) {
         if (const int s = physreg::interrupt_signal(); s != 0) { // the error came from the interruption (a child program stopped by it)
-            std::cerr << "physreg: " << physreg::interruption_message(s) << " (" << e.what() << ")" << std::endl;
+            // An Interrupted rethrown as an Error with context already carries the message: say it once.
+            const std::string message = physreg::interruption_message(s), what = e.what();
+            std::cerr << "physreg: " << message;
+            if (what.find(message) == std::string::npos) std::cerr << " (" << what << ")";
+            std::cerr << std::endl;
             return 128 + s;
         }
         std::cerr << "physreg: error: " << e.what() << std::endl;

@@ -7,8 +7,8 @@
 
 #include "physreg/evaluation/tre.hpp"
 #include "physreg/phantom/dataset.hpp"
-#include "physreg/registration/enrichment.hpp"
-#include "physreg/registration/liver_model.hpp"
+#include "physreg/registration/compression/enrichment.hpp"
+#include "physreg/registration/compression/liver_model.hpp"
 
 #include <optional>
 #include <string>

@@ -17,7 +17,7 @@
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/io/png.hpp"
 #include "physreg/io/vtu.hpp"
-#include "physreg/mechanics/calculix.hpp"
+#include "physreg/mechanics/simulation/calculix.hpp"
 #include "physreg/mesh/coarsen.hpp"
 #include "physreg/mesh/faces.hpp"
 #include "physreg/mesh/label_grid.hpp"

@@ -5,7 +5,7 @@
 #include "physreg/core/interrupt.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/core/progress_note.hpp"
-#include "physreg/mechanics/calculix.hpp"
+#include "physreg/mechanics/simulation/calculix.hpp"
 #include "physreg/phantom/dataset.hpp"
 
 #include <algorithm>

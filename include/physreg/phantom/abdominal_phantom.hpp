@@ -8,7 +8,7 @@
 // Coordinates are physical mm in LPS: x towards the patient's left, y posterior, z superior; the
 // phantom lies supine with its flat base at the posterior side, so tools press along +y.
 #include "physreg/image/image_geometry.hpp"
-#include "physreg/mechanics/embedded_beams.hpp"
+#include "physreg/mechanics/elements/embedded_beams.hpp"
 
 #include <cstdint>
 #include <set>

@@ -7,8 +7,8 @@
 // Neo-Hookean, indenter contact), with deformed images, ITK displacement fields, VTU meshes,
 // partial intra-operative surfaces, segmentation pairs, pictures and a JSON manifest.
 #include "physreg/core/types.hpp"
-#include "physreg/mechanics/loads.hpp"
-#include "physreg/mechanics/tled_solver.hpp"
+#include "physreg/mechanics/loads/loads.hpp"
+#include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/model/tissue_table.hpp"
 #include "physreg/phantom/abdominal_phantom.hpp"
 #include "physreg/phantom/ground_truth.hpp"

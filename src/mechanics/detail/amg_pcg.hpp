@@ -3,7 +3,7 @@
 // Conjugate gradients preconditioned by hypre's BoomerAMG, set up for 3D elasticity (the solver
 // behind LinearSolverKind::pcg_amg). Each call is independent: hypre runs on MPI_COMM_SELF, so
 // every MPI rank of a distributed run solves its own systems.
-#include "physreg/mechanics/stiffness_assembly.hpp"
+#include "physreg/mechanics/implicit/stiffness_assembly.hpp"
 
 #include <Eigen/Core>
 #include <vector>

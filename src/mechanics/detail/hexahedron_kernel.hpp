@@ -5,7 +5,7 @@
 // all arithmetic runs over the lanes (the compiler vectorises the `omp simd` loops), and forces
 // are scattered back node by node. Elements of one colour share no node, so the scatter is race
 // free. (A GPU port would map one lane to one thread; there is none yet.)
-#include "physreg/mechanics/material.hpp"
+#include "physreg/mechanics/materials/material.hpp"
 
 #include <cmath>
 #include <cstdint>

@@ -11,8 +11,8 @@
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/phantom/dataset.hpp"
 #include "physreg/evaluation/tre.hpp"
-#include "physreg/registration/estimation.hpp"
-#include "physreg/registration/liver_model.hpp"
+#include "physreg/registration/compression/estimation.hpp"
+#include "physreg/registration/compression/liver_model.hpp"
 #include "test_support.hpp"
 
 #include <cstdio>

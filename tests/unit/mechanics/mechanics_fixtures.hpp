@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // Blocks and node selections for the mechanics verification tests.
-#include "physreg/mechanics/tled_solver.hpp"
+#include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 #include "physreg/mesh/tet_split.hpp"
 #include "test_support.hpp"

@@ -4,8 +4,8 @@
 // Rayleigh damping, mass matrices, and the errors of bad input.
 #include "mechanics_fixtures.hpp"
 #include "physreg/core/error.hpp"
-#include "physreg/mechanics/backward_euler.hpp"
-#include "physreg/mechanics/newton_solver.hpp"
+#include "physreg/mechanics/implicit/backward_euler.hpp"
+#include "physreg/mechanics/implicit/newton_solver.hpp"
 
 #include <gtest/gtest.h>
 

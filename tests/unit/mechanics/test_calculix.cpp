@@ -6,8 +6,8 @@
 // A block on a fixed base is indented by a frictionless flat punch (the top nodes of a central
 // patch pushed down, free to slide). Skips when ccx is not installed.
 #include "mechanics_fixtures.hpp"
-#include "physreg/mechanics/calculix.hpp"
-#include "physreg/mechanics/newton_solver.hpp"
+#include "physreg/mechanics/simulation/calculix.hpp"
+#include "physreg/mechanics/implicit/newton_solver.hpp"
 
 #include <gtest/gtest.h>
 

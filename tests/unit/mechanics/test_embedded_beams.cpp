@@ -2,8 +2,8 @@
 // Paper 001's vessel beams: Timoshenko elements embedded in tetrahedra — the element matrix, rigid
 // motions, a cantilever against Timoshenko's deflection, and the centreline files.
 #include "mechanics_fixtures.hpp"
-#include "physreg/mechanics/backward_euler.hpp"
-#include "physreg/mechanics/embedded_beams.hpp"
+#include "physreg/mechanics/implicit/backward_euler.hpp"
+#include "physreg/mechanics/elements/embedded_beams.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>

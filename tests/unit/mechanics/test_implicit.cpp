@@ -3,9 +3,9 @@
 // solver, checked against finite differences, analytical solutions and dynamic relaxation.
 #include "mechanics_fixtures.hpp"
 #include "physreg/core/error.hpp"
-#include "physreg/mechanics/newton_solver.hpp"
-#include "physreg/mechanics/stiffness_assembly.hpp"
-#include "physreg/mechanics/tissue_coupling.hpp"
+#include "physreg/mechanics/implicit/newton_solver.hpp"
+#include "physreg/mechanics/implicit/stiffness_assembly.hpp"
+#include "physreg/mechanics/coupling/tissue_coupling.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>

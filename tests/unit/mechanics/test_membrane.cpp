@@ -3,9 +3,9 @@
 // checked against the energy, rigid motions, finite differences, and the axial stiffness a skin of
 // membrane adds to a block in uniaxial tension.
 #include "mechanics_fixtures.hpp"
-#include "physreg/mechanics/backward_euler.hpp"
-#include "physreg/mechanics/membrane.hpp"
-#include "physreg/registration/surface_model.hpp"
+#include "physreg/mechanics/implicit/backward_euler.hpp"
+#include "physreg/mechanics/elements/membrane.hpp"
+#include "physreg/registration/surface/surface_model.hpp"
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>

@@ -4,8 +4,8 @@
 // reduces to our Neo-Hookean law for C01 = 0, and on a CGAL-meshed gel block with an inclusion
 // physreg's Newton matches CalculiX's C3D4 MOONEY-RIVLIN (skips without ccx).
 #include "mechanics_fixtures.hpp"
-#include "physreg/mechanics/calculix.hpp"
-#include "physreg/mechanics/newton_solver.hpp"
+#include "physreg/mechanics/simulation/calculix.hpp"
+#include "physreg/mechanics/implicit/newton_solver.hpp"
 #include "physreg/phantom/dataset.hpp"
 #include "physreg/phantom/ground_truth.hpp"
 

@@ -2,7 +2,7 @@
 #include "mechanics_fixtures.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/io/mesh_io.hpp"
-#include "physreg/mechanics/simulation.hpp"
+#include "physreg/mechanics/simulation/simulation.hpp"
 
 #include <fstream>
 

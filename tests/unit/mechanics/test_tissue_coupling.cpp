@@ -2,9 +2,9 @@
 // MLS shape functions and tissue–tissue penalty coupling (paper 000 eqs. 1–5).
 #include "test_support.hpp"
 
-#include "physreg/mechanics/mls.hpp"
-#include "physreg/mechanics/tissue_coupling.hpp"
-#include "physreg/mechanics/tled_solver.hpp"
+#include "physreg/mechanics/coupling/mls.hpp"
+#include "physreg/mechanics/coupling/tissue_coupling.hpp"
+#include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 
 #include <gtest/gtest.h>

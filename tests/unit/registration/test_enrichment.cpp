@@ -8,8 +8,8 @@
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/mesh/point_location.hpp"
 #include "physreg/phantom/dataset.hpp"
-#include "physreg/registration/enrichment.hpp"
-#include "physreg/registration/estimation.hpp"
+#include "physreg/registration/compression/enrichment.hpp"
+#include "physreg/registration/compression/estimation.hpp"
 
 #include <gtest/gtest.h>
 

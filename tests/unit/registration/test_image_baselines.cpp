@@ -5,7 +5,7 @@
 
 #include "physreg/core/error.hpp"
 #include "physreg/field/field_mapping.hpp"
-#include "physreg/registration/image_baselines.hpp"
+#include "physreg/registration/images/image_baselines.hpp"
 
 #include <cmath>
 

@@ -8,8 +8,8 @@
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/phantom/dataset.hpp"
-#include "physreg/registration/condensed_contact.hpp"
-#include "physreg/registration/estimation.hpp"
+#include "physreg/registration/compression/condensed_contact.hpp"
+#include "physreg/registration/compression/estimation.hpp"
 
 #include <gtest/gtest.h>
 

@@ -6,9 +6,9 @@
 #include "physreg/core/error.hpp"
 #include "physreg/field/image_warping.hpp"
 #include "physreg/image/distance_map.hpp"
-#include "physreg/mechanics/linear_elasticity.hpp"
+#include "physreg/mechanics/implicit/linear_elasticity.hpp"
 #include "physreg/mesh/tetrahedral_meshing.hpp"
-#include "physreg/registration/segmentation_registration.hpp"
+#include "physreg/registration/images/segmentation_registration.hpp"
 
 #include <Eigen/Dense>
 #include <array>
@@ -369,7 +369,7 @@ INSTANTIATE_TEST_SUITE_P(SegmentationRegistration, Alternation,
 } // namespace
 } // namespace physreg
 
-#include "physreg/registration/segmentation_alignment.hpp"
+#include "physreg/registration/images/segmentation_alignment.hpp"
 
 namespace physreg {
 

@@ -3,11 +3,11 @@
 // law, the annealing schedule, force spreading, rigid ICP, the biomechanical registration on an
 // ellipsoid, sampled Hausdorff distances, the surface model and its regions.
 #include "physreg/evaluation/surface_distance.hpp"
-#include "physreg/mechanics/tled_model.hpp"
+#include "physreg/mechanics/elements/tled_model.hpp"
 #include "physreg/mesh/triangle_search.hpp"
-#include "physreg/registration/surface_adjoint.hpp"
-#include "physreg/registration/surface_model.hpp"
-#include "physreg/registration/surface_registration.hpp"
+#include "physreg/registration/surface/surface_adjoint.hpp"
+#include "physreg/registration/surface/surface_model.hpp"
+#include "physreg/registration/surface/surface_registration.hpp"
 #include "test_support.hpp"
 
 #include <gtest/gtest.h>

@@ -1,0 +1,97 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+#pragma once
+// Condensed contact for tool updates (issue 30; Bro-Nielsen & Cotin 1996, Cotin et al. 1999):
+// paper 000's model linearised at rest, its stiffness K factorised once (CHOLMOD), and the
+// compliance W = K⁻¹ kept only where it is needed — at the candidate contact nodes (the skin nodes
+// any tool position of the session can reach) and at the query nodes (around the landmarks). Each
+// update then solves the frictionless contact on that block alone, as a linear complementarity
+// problem by projected Gauss–Seidel warm-started from the previous update:
+//   w = q + D λ ≥ 0, λ ≥ 0, wᵀλ = 0,  D_ij = n_iᵀ W_ij n_j,  q_i = g_i(u) − n_iᵀ u_i,
+// λ_i the contact force (N) on node i along the tool's outward normal n_i, g_i its gap (mm). The
+// normals and gaps are re-linearised at the solution a few times (the tool is curved). The query
+// displacements are W_qc F; the whole field, when asked for, is one back-substitution.
+//
+// The law is small-strain linear elasticity (the tangent of the model's Neo-Hookean law at rest,
+// with its hourglass control and MLS coupling): exact for small tool travels, an approximation for
+// deep ones — bench condensed measures how far it lands from the nonlinear solution.
+#include "physreg/mechanics/loads/loads.hpp"
+#include "physreg/registration/compression/liver_model.hpp"
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+namespace physreg {
+
+struct CondensedContactOptions {
+    double candidate_margin_mm = 10.0; ///< candidates: surface nodes within the tool's reach + this of a session path
+    double active_gap_mm = 5.0;        ///< a candidate enters an update's LCP when its gap is below this (mm)
+    int lcp_max_sweeps = 2000;         ///< projected Gauss–Seidel sweeps per linearisation
+    double lcp_tolerance_mm = 1e-5;    ///< largest complementarity violation |min(w, λ D_ii)|, mm
+    int normal_updates = 4;            ///< re-linearisations of the normals and gaps per update
+    double penetration_tolerance_mm = 1e-3; ///< accepted penetration after the last linearisation
+    void validate() const;
+};
+
+struct CondensedPrecomputation {
+    std::size_t dofs = 0, candidate_nodes = 0, query_nodes = 0;
+    double assembly_s = 0.0, factorisation_s = 0.0, compliance_s = 0.0;
+    std::size_t compliance_bytes = 0;
+};
+
+class CondensedContactModel {
+public:
+    /// `session_tools`: every tool path of the session (candidates lie near them); `query_nodes`:
+    /// nodes whose displacement each update returns. Throws Error when no surface node is near the
+    /// tools, when the stiffness cannot be factored, or for shapes without a finite reach.
+    CondensedContactModel(const LiverModel& model, const std::vector<Indenter>& session_tools, std::vector<std::int32_t> query_nodes,
+                          const CondensedContactOptions& options = {});
+    ~CondensedContactModel();
+    CondensedContactModel(CondensedContactModel&&) noexcept;
+
+    struct Update {
+        int active_nodes = 0;        ///< candidates in contact (λ > 0)
+        int lcp_nodes = 0;           ///< candidates in the LCP
+        int sweeps = 0;              ///< Gauss–Seidel sweeps, all linearisations
+        double max_penetration_mm = 0.0;
+        double total_force_n = 0.0;  ///< |Σ λ n|
+        double contact_ms = 0.0, recovery_ms = 0.0;
+    };
+    /// The tool (its shape, at its reference position `position_mm`) → contact forces and the
+    /// query nodes' displacements. Throws Error when the LCP does not converge or a penetration
+    /// beyond the tolerance remains (naming the update's position).
+    Update move_to(const Indenter& tool, const Vec3& position_mm);
+    /// Forget the contact forces (a new tool sequence starts from rest).
+    void reset();
+    /// 3 per query node (the order given), mm, after the last update.
+    const std::vector<double>& query_displacement_mm() const { return m_query_u; }
+    /// Every node's displacement (3 per node, mm) with only the query nodes filled (zero elsewhere):
+    /// enough for anything that reads the query nodes alone, such as the landmarks' interpolation.
+    std::vector<double> query_field_mm() const;
+    /// Every node's displacement (3 per node, mm): one solve with the factor.
+    std::vector<double> full_displacement_mm() const;
+
+    const CondensedPrecomputation& precomputation() const { return m_pre; }
+    const std::vector<std::int32_t>& candidate_nodes() const { return m_candidates; }
+    const std::vector<std::int32_t>& query_nodes() const { return m_query; }
+
+private:
+    struct Factor;
+    const LiverModel& m_model;
+    CondensedContactOptions m_options;
+    std::unique_ptr<Factor> m_factor;
+    std::vector<std::int32_t> m_candidates, m_query;
+    Eigen::MatrixXd m_wcc; ///< compliance at candidate dofs (3c × 3c), mm/N
+    Eigen::MatrixXd m_wqc; ///< query dofs × candidate dofs (3q × 3c), mm/N
+    Eigen::VectorXd m_force; ///< 3c: the last contact forces (N)
+    double m_least_compliance = 0.0; ///< below this a candidate cannot move along a normal (held), mm/N
+    std::vector<double> m_lambda; ///< per candidate: last λ (warm start)
+    std::vector<double> m_query_u;
+    CondensedPrecomputation m_pre;
+};
+
+/// Nodes within `radius_mm` of any of `points` (rest positions), sorted.
+std::vector<std::int32_t> nodes_near(const VolumeMesh& mesh, const std::vector<Vec3>& points, double radius_mm);
+
+} // namespace physreg

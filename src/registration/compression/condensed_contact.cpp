@@ -1,0 +1,334 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+#include "physreg/registration/compression/condensed_contact.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/mechanics/linear/linear_solver.hpp"
+#include "physreg/mechanics/implicit/stiffness_assembly.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <set>
+
+namespace physreg {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t)
+{
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+
+double distance_to_segment(const Vec3& x, const Vec3& a, const Vec3& b)
+{
+    const Vec3 ab = b - a;
+    const double l2 = ab.squaredNorm();
+    const double s = l2 > 0 ? std::clamp((x - a).dot(ab) / l2, 0.0, 1.0) : 0.0;
+    return (x - (a + s * ab)).norm();
+}
+
+} // namespace
+
+void CondensedContactOptions::validate() const
+{
+    if (!(candidate_margin_mm >= 0 && std::isfinite(candidate_margin_mm))) fail("condensed contact: candidate margin must be ≥ 0 mm (got {})", candidate_margin_mm);
+    if (!(active_gap_mm > 0 && std::isfinite(active_gap_mm))) fail("condensed contact: active gap must be > 0 mm (got {})", active_gap_mm);
+    if (lcp_max_sweeps < 1) fail("condensed contact: LCP sweeps must be ≥ 1 (got {})", lcp_max_sweeps);
+    if (!(lcp_tolerance_mm > 0)) fail("condensed contact: LCP tolerance must be > 0 mm (got {})", lcp_tolerance_mm);
+    if (normal_updates < 1) fail("condensed contact: normal updates must be ≥ 1 (got {})", normal_updates);
+    if (!(penetration_tolerance_mm > 0)) fail("condensed contact: penetration tolerance must be > 0 mm (got {})", penetration_tolerance_mm);
+}
+
+struct CondensedContactModel::Factor {
+    SparseMatrix k;
+    SymmetricSolver solver{LinearSolverOptions{LinearSolverKind::cholmod}};
+    std::vector<char> constrained; ///< per dof
+};
+
+std::vector<std::int32_t> nodes_near(const VolumeMesh& mesh, const std::vector<Vec3>& points, double radius_mm)
+{
+    std::vector<std::int32_t> out;
+    for (std::size_t n = 0; n < mesh.node_count(); ++n)
+        for (const auto& p : points)
+            if ((mesh.nodes[n] - p).norm() <= radius_mm) {
+                out.push_back(static_cast<std::int32_t>(n));
+                break;
+            }
+    return out;
+}
+
+CondensedContactModel::CondensedContactModel(const LiverModel& model, const std::vector<Indenter>& session_tools,
+                                             std::vector<std::int32_t> query_nodes, const CondensedContactOptions& options)
+    : m_model(model), m_options(options), m_factor(std::make_unique<Factor>()), m_query(std::move(query_nodes))
+{
+    options.validate();
+    if (!model.tled) fail("condensed contact: the model has no mechanics");
+    if (session_tools.empty()) fail("condensed contact: no tool path given (the candidates lie near the session's tools)");
+    const std::size_t nodes = model.mesh.node_count(), dofs = 3 * nodes;
+    for (const auto q : m_query)
+        if (q < 0 || static_cast<std::size_t>(q) >= nodes) fail("condensed contact: query node {} out of range (0 … {})", q, nodes - 1);
+
+    // Supports: held dofs get an identity row and column (their displacement stays 0).
+    auto& constrained = m_factor->constrained;
+    constrained.assign(dofs, 0);
+    for (const auto& c : model.supports())
+        for (const auto n : c.nodes)
+            for (int d = 0; d < 3; ++d)
+                if (c.dofs[static_cast<std::size_t>(d)]) constrained[3 * static_cast<std::size_t>(n) + static_cast<std::size_t>(d)] = 1;
+
+    // Candidates: free surface nodes within the tool's reach + the margin of a session path.
+    for (const auto& t : session_tools) {
+        t.validate();
+        if (!std::isfinite(t.reach_mm())) fail("condensed contact: tool '{}' has no finite reach (sphere or box tools only)", t.name);
+    }
+    for (const auto n : model.tled->surface_nodes()) {
+        const auto i = static_cast<std::size_t>(n);
+        if (constrained[3 * i] && constrained[3 * i + 1] && constrained[3 * i + 2]) continue;
+        const Vec3& x = model.mesh.nodes[i];
+        for (const auto& t : session_tools) {
+            bool near = false;
+            for (std::size_t s = 0; s < t.path.size() && !near; ++s)
+                near = distance_to_segment(x, t.path[s], t.path[std::min(s + 1, t.path.size() - 1)]) <= t.reach_mm() + options.candidate_margin_mm;
+            if (near) {
+                m_candidates.push_back(n);
+                break;
+            }
+        }
+    }
+    if (m_candidates.empty()) fail("condensed contact: no surface node lies within the tools' reach (+{} mm) of their paths", options.candidate_margin_mm);
+
+    // The tangent at rest (the model's law linearised), supports eliminated.
+    auto t0 = std::chrono::steady_clock::now();
+    const PenaltyCoupling* coupling = model.coupling.points().empty() ? nullptr : &model.coupling;
+    StiffnessAssembler assembler(*model.tled, coupling);
+    SparseMatrix& k = m_factor->k;
+    k = assembler.make_matrix();
+    std::vector<double> zero(dofs, 0.0), force(dofs, 0.0);
+    const Assembly a = assembler.assemble(zero.data(), force.data(), &k);
+    if (a.non_finite_element >= 0) fail("condensed contact: element {} has a non-finite stiffness at rest", a.non_finite_element);
+    for (int j = 0; j < k.outerSize(); ++j)
+        for (SparseMatrix::InnerIterator it(k, j); it; ++it)
+            if (constrained[static_cast<std::size_t>(it.row())] || constrained[static_cast<std::size_t>(j)]) it.valueRef() = it.row() == j ? 1.0 : 0.0;
+    m_pre.assembly_s = seconds_since(t0);
+    t0 = std::chrono::steady_clock::now();
+    if (m_factor->solver.factorise(k).shift > 0)
+        fail("condensed contact: the stiffness at rest is not positive definite (CHOLMOD needed a shift): is the model held against rigid motion?");
+    m_pre.factorisation_s = seconds_since(t0);
+
+    // Compliance columns of the candidate dofs, a block of right-hand sides at a time.
+    t0 = std::chrono::steady_clock::now();
+    const auto c3 = static_cast<Eigen::Index>(3 * m_candidates.size()), q3 = static_cast<Eigen::Index>(3 * m_query.size());
+    m_wcc.setZero(c3, c3);
+    m_wqc.setZero(q3, c3);
+    constexpr Eigen::Index block = 48;
+    for (Eigen::Index b0 = 0; b0 < c3; b0 += block) {
+        const Eigen::Index bs = std::min(block, c3 - b0);
+        Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(dofs), bs);
+        for (Eigen::Index j = 0; j < bs; ++j) {
+            const auto dof = 3 * static_cast<std::size_t>(m_candidates[static_cast<std::size_t>((b0 + j) / 3)]) + static_cast<std::size_t>((b0 + j) % 3);
+            if (!constrained[dof]) rhs(static_cast<Eigen::Index>(dof), j) = 1.0;
+        }
+        Eigen::MatrixXd x;
+        m_factor->solver.solve_factored(rhs, x);
+        for (Eigen::Index j = 0; j < bs; ++j) {
+            for (Eigen::Index i = 0; i < c3; ++i) {
+                const auto dof = 3 * static_cast<std::size_t>(m_candidates[static_cast<std::size_t>(i / 3)]) + static_cast<std::size_t>(i % 3);
+                m_wcc(i, b0 + j) = constrained[dof] ? 0.0 : x(static_cast<Eigen::Index>(dof), j);
+            }
+            for (Eigen::Index i = 0; i < q3; ++i) {
+                const auto dof = 3 * static_cast<std::size_t>(m_query[static_cast<std::size_t>(i / 3)]) + static_cast<std::size_t>(i % 3);
+                m_wqc(i, b0 + j) = constrained[dof] ? 0.0 : x(static_cast<Eigen::Index>(dof), j);
+            }
+        }
+    }
+    m_pre.compliance_s = seconds_since(t0);
+    m_least_compliance = 1e-12 * m_wcc.diagonal().maxCoeff();
+    m_pre.dofs = dofs;
+    m_pre.candidate_nodes = m_candidates.size();
+    m_pre.query_nodes = m_query.size();
+    m_pre.compliance_bytes = static_cast<std::size_t>(m_wcc.size() + m_wqc.size()) * sizeof(double);
+    m_force = Eigen::VectorXd::Zero(c3);
+    m_lambda.assign(m_candidates.size(), 0.0);
+    m_query_u.assign(static_cast<std::size_t>(q3), 0.0);
+}
+
+CondensedContactModel::~CondensedContactModel() = default;
+CondensedContactModel::CondensedContactModel(CondensedContactModel&&) noexcept = default;
+
+CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& tool, const Vec3& position_mm)
+{
+    const auto start = std::chrono::steady_clock::now();
+    Indenter t = tool;
+    t.path = {position_mm};
+    const std::size_t c = m_candidates.size();
+    Update up;
+
+    // Candidate displacements from the current forces (only the loaded columns contribute).
+    std::vector<std::size_t> loaded;
+    auto candidate_displacement = [&](Eigen::VectorXd& u) {
+        u.setZero(static_cast<Eigen::Index>(3 * c));
+        for (const auto j : loaded)
+            for (int d = 0; d < 3; ++d) {
+                const double f = m_force(static_cast<Eigen::Index>(3 * j + static_cast<std::size_t>(d)));
+                if (f != 0.0) u.noalias() += m_wcc.col(static_cast<Eigen::Index>(3 * j + static_cast<std::size_t>(d))) * f;
+            }
+    };
+    for (std::size_t j = 0; j < c; ++j)
+        if (m_lambda[j] > 0) loaded.push_back(j);
+
+    Eigen::VectorXd u;
+    std::vector<Vec3> normal(c);
+    std::vector<double> gap(c);
+    auto gaps_at = [&](const Eigen::VectorXd& uc) {
+        for (std::size_t i = 0; i < c; ++i) {
+            const Vec3 x = m_model.mesh.nodes[static_cast<std::size_t>(m_candidates[i])] + uc.segment<3>(static_cast<Eigen::Index>(3 * i));
+            Vec3 s, n;
+            t.closest_surface_point(x, 0.0, s, n);
+            normal[i] = n;
+            gap[i] = (x - s).dot(n); // signed: < 0 inside the tool
+        }
+    };
+    candidate_displacement(u);
+    gaps_at(u);
+
+    std::vector<std::size_t> set; // the LCP's candidates
+    for (int linearisation = 0; linearisation < m_options.normal_updates; ++linearisation) {
+        // A node that cannot move along the tool's normal (a support holds that direction) has no
+        // compliance there and stays out of the LCP; if the tool reaches it, the penetration check
+        // below says so.
+        std::set<std::size_t> chosen;
+        for (std::size_t i = 0; i < c; ++i) {
+            const double own = normal[i].dot(m_wcc.block<3, 3>(static_cast<Eigen::Index>(3 * i), static_cast<Eigen::Index>(3 * i)) * normal[i]);
+            if ((gap[i] < m_options.active_gap_mm || m_lambda[i] > 0) && own > m_least_compliance) chosen.insert(i);
+        }
+        set.assign(chosen.begin(), chosen.end());
+        const auto m = static_cast<Eigen::Index>(set.size());
+        // D = Nᵀ W N and q on the set, linearised at the current displacement.
+        Eigen::MatrixXd dm(m, m);
+        Eigen::VectorXd q(m), lambda(m);
+        for (Eigen::Index a = 0; a < m; ++a) {
+            const std::size_t i = set[static_cast<std::size_t>(a)];
+            q(a) = gap[i] - normal[i].dot(u.segment<3>(static_cast<Eigen::Index>(3 * i)));
+            lambda(a) = m_lambda[i];
+            for (Eigen::Index b = 0; b < m; ++b) {
+                const std::size_t j = set[static_cast<std::size_t>(b)];
+                dm(a, b) = normal[i].dot(m_wcc.block<3, 3>(static_cast<Eigen::Index>(3 * i), static_cast<Eigen::Index>(3 * j)) * normal[j]);
+            }
+        }
+        // Block principal pivoting (an active-set method) from the warm start, then projected
+        // Gauss–Seidel if it cycles.
+        std::vector<char> active(static_cast<std::size_t>(m), 0);
+        for (Eigen::Index a = 0; a < m; ++a) active[static_cast<std::size_t>(a)] = lambda(a) > 0 || q(a) < 0;
+        bool solved = false;
+        for (int pivot = 0; pivot < 30 && !solved; ++pivot) {
+            std::vector<Eigen::Index> idx;
+            for (Eigen::Index a = 0; a < m; ++a)
+                if (active[static_cast<std::size_t>(a)]) idx.push_back(a);
+            lambda.setZero();
+            if (!idx.empty()) {
+                const auto na = static_cast<Eigen::Index>(idx.size());
+                Eigen::MatrixXd daa(na, na);
+                Eigen::VectorXd rhs(na);
+                for (Eigen::Index a = 0; a < na; ++a) {
+                    rhs(a) = -q(idx[static_cast<std::size_t>(a)]);
+                    for (Eigen::Index b = 0; b < na; ++b) daa(a, b) = dm(idx[static_cast<std::size_t>(a)], idx[static_cast<std::size_t>(b)]);
+                }
+                const Eigen::VectorXd la = daa.ldlt().solve(rhs);
+                for (Eigen::Index a = 0; a < na; ++a) lambda(idx[static_cast<std::size_t>(a)]) = la(a);
+            }
+            const Eigen::VectorXd w = q + dm * lambda;
+            bool changed = false;
+            for (Eigen::Index a = 0; a < m; ++a) {
+                const double scale = dm(a, a);
+                if (active[static_cast<std::size_t>(a)] && lambda(a) < -m_options.lcp_tolerance_mm / scale) active[static_cast<std::size_t>(a)] = 0, changed = true;
+                else if (!active[static_cast<std::size_t>(a)] && w(a) < -m_options.lcp_tolerance_mm) active[static_cast<std::size_t>(a)] = 1, changed = true;
+            }
+            ++up.sweeps;
+            solved = !changed;
+        }
+        if (!solved) {
+            lambda = lambda.cwiseMax(0.0);
+            double violation = 1e300;
+            for (int sweep = 0; sweep < m_options.lcp_max_sweeps && violation > m_options.lcp_tolerance_mm; ++sweep, ++up.sweeps) {
+                violation = 0.0;
+                for (Eigen::Index a = 0; a < m; ++a) {
+                    const double w = q(a) + dm.row(a).dot(lambda);
+                    const double next = std::max(0.0, lambda(a) - w / dm(a, a));
+                    violation = std::max(violation, std::abs(std::min(w, next * dm(a, a))));
+                    lambda(a) = next;
+                }
+            }
+            if (violation > m_options.lcp_tolerance_mm)
+                fail("condensed contact: the contact problem at the tool position ({:.2f}, {:.2f}, {:.2f}) mm did not converge "
+                     "({} nodes, complementarity violation {:.3g} mm after {} sweeps)",
+                     position_mm.x(), position_mm.y(), position_mm.z(), m, violation, m_options.lcp_max_sweeps);
+        }
+        // New forces along the new normals; re-linearise at the displacement they give.
+        std::fill(m_lambda.begin(), m_lambda.end(), 0.0);
+        m_force.setZero();
+        loaded.clear();
+        for (Eigen::Index a = 0; a < m; ++a) {
+            const std::size_t i = set[static_cast<std::size_t>(a)];
+            if (lambda(a) <= 0) continue;
+            m_lambda[i] = lambda(a);
+            m_force.segment<3>(static_cast<Eigen::Index>(3 * i)) = lambda(a) * normal[i];
+            loaded.push_back(i);
+        }
+        candidate_displacement(u);
+        gaps_at(u);
+        up.lcp_nodes = static_cast<int>(m);
+    }
+    up.max_penetration_mm = 0.0;
+    for (std::size_t i = 0; i < c; ++i) up.max_penetration_mm = std::max(up.max_penetration_mm, -gap[i]);
+    if (up.max_penetration_mm > m_options.penetration_tolerance_mm)
+        fail("condensed contact: {:.3g} mm of penetration remain at the tool position ({:.2f}, {:.2f}, {:.2f}) mm after {} linearisations "
+             "(tolerance {:.3g} mm)",
+             up.max_penetration_mm, position_mm.x(), position_mm.y(), position_mm.z(), m_options.normal_updates, m_options.penetration_tolerance_mm);
+    Vec3 total = Vec3::Zero();
+    for (const auto j : loaded) total += m_force.segment<3>(static_cast<Eigen::Index>(3 * j));
+    up.total_force_n = total.norm();
+    up.active_nodes = static_cast<int>(loaded.size());
+    const auto contact_done = std::chrono::steady_clock::now();
+    up.contact_ms = 1e3 * std::chrono::duration<double>(contact_done - start).count();
+
+    // The query nodes from the loaded columns.
+    Eigen::VectorXd uq = Eigen::VectorXd::Zero(m_wqc.rows());
+    for (const auto j : loaded) uq.noalias() += m_wqc.middleCols<3>(static_cast<Eigen::Index>(3 * j)) * m_force.segment<3>(static_cast<Eigen::Index>(3 * j));
+    m_query_u.assign(uq.data(), uq.data() + uq.size());
+    up.recovery_ms = 1e3 * seconds_since(contact_done);
+    return up;
+}
+
+void CondensedContactModel::reset()
+{
+    m_force.setZero();
+    std::fill(m_lambda.begin(), m_lambda.end(), 0.0);
+    std::fill(m_query_u.begin(), m_query_u.end(), 0.0);
+}
+
+std::vector<double> CondensedContactModel::query_field_mm() const
+{
+    std::vector<double> u(3 * m_model.mesh.node_count(), 0.0);
+    for (std::size_t i = 0; i < m_query.size(); ++i)
+        for (std::size_t d = 0; d < 3; ++d) u[3 * static_cast<std::size_t>(m_query[i]) + d] = m_query_u[3 * i + d];
+    return u;
+}
+
+std::vector<double> CondensedContactModel::full_displacement_mm() const
+{
+    const std::size_t dofs = m_factor->constrained.size();
+    Eigen::VectorXd f = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(dofs));
+    for (std::size_t j = 0; j < m_candidates.size(); ++j)
+        for (int d = 0; d < 3; ++d) {
+            const auto dof = 3 * static_cast<std::size_t>(m_candidates[j]) + static_cast<std::size_t>(d);
+            if (!m_factor->constrained[dof]) f(static_cast<Eigen::Index>(dof)) = m_force(static_cast<Eigen::Index>(3 * j + static_cast<std::size_t>(d)));
+        }
+    Eigen::VectorXd u;
+    m_factor->solver.solve_factored(f, u);
+    std::vector<double> out(u.data(), u.data() + u.size());
+    for (std::size_t d = 0; d < dofs; ++d)
+        if (m_factor->constrained[d]) out[d] = 0.0;
+    return out;
+}
+
+} // namespace physreg

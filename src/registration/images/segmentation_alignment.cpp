@@ -1,0 +1,202 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+#include "physreg/registration/images/segmentation_alignment.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+#include "physreg/image/distance_map.hpp"
+#include "../detail/principal_axes.hpp"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <set>
+
+namespace physreg {
+
+InitialAlignment parse_initial_alignment(const std::string& text)
+{
+    if (text == "identity") return InitialAlignment::identity;
+    if (text == "centroid") return InitialAlignment::centroid;
+    if (text == "rigid") return InitialAlignment::rigid;
+    fail("--initial '{}': use identity, centroid or rigid", text);
+}
+
+std::string to_string(InitialAlignment mode)
+{
+    switch (mode) {
+    case InitialAlignment::identity: return "identity";
+    case InitialAlignment::centroid: return "centroid";
+    case InitialAlignment::rigid: return "rigid";
+    }
+    return "?";
+}
+
+namespace {
+
+struct StructurePoints {
+    std::vector<Vec3> all;      ///< voxel centres (every structure)
+    std::vector<std::vector<Vec3>> boundary; ///< per structure: voxels with a 6-neighbour of another label
+};
+
+StructurePoints collect(const LabelVolume& v, const std::vector<std::int32_t>& structures, const std::string& which)
+{
+    StructurePoints p;
+    p.boundary.resize(structures.size());
+    const auto& g = v.geometry;
+    std::vector<std::size_t> counts(structures.size(), 0);
+    for (std::int64_t k = 0; k < g.size[2]; ++k)
+        for (std::int64_t j = 0; j < g.size[1]; ++j)
+            for (std::int64_t i = 0; i < g.size[0]; ++i) {
+                const std::int32_t label = v.at(i, j, k);
+                const auto s = std::find(structures.begin(), structures.end(), label);
+                if (s == structures.end()) continue;
+                const auto index = static_cast<std::size_t>(s - structures.begin());
+                ++counts[index];
+                const Vec3 x = g.index_to_physical(Vec3(double(i), double(j), double(k)));
+                p.all.push_back(x);
+                // Boundary points: the centres of the faces this voxel shares with another label
+                // (where the distance maps' zero level lies); faces on the image border are no
+                // boundary of the organ, only of the field of view.
+                const std::int64_t n[6][3] = {{i - 1, j, k}, {i + 1, j, k}, {i, j - 1, k}, {i, j + 1, k}, {i, j, k - 1}, {i, j, k + 1}};
+                for (const auto& q : n) {
+                    if (q[0] < 0 || q[1] < 0 || q[2] < 0 || q[0] >= g.size[0] || q[1] >= g.size[1] || q[2] >= g.size[2]) continue;
+                    if (v.at(q[0], q[1], q[2]) == label) continue;
+                    const Vec3 y = g.index_to_physical(Vec3(double(q[0]), double(q[1]), double(q[2])));
+                    p.boundary[index].push_back(0.5 * (x + y));
+                }
+            }
+    for (std::size_t s = 0; s < structures.size(); ++s)
+        if (counts[s] == 0) fail("initial alignment: structure {} is empty in the {} segmentation; it cannot be matched", structures[s], which);
+        else if (p.boundary[s].empty())
+            fail("initial alignment: structure {} fills the {} image (no boundary inside it); it cannot be matched", structures[s], which);
+    // At most 4000 boundary points per structure (every n-th): the cost is a mean, not a sum of voxels.
+    for (auto& b : p.boundary)
+        if (b.size() > 4000) {
+            const std::size_t stride = (b.size() + 3999) / 4000;
+            std::vector<Vec3> kept;
+            for (std::size_t q = 0; q < b.size(); q += stride) kept.push_back(b[q]);
+            b.swap(kept);
+        }
+    return p;
+}
+
+// Root mean square of φ over the moving boundary points under (R, t); Gauss–Newton with a
+// Levenberg damping from there.
+struct Fit {
+    Mat3 rotation;
+    Vec3 translation;
+    double rms = 0.0;
+    int iterations = 0;
+};
+
+double rms_distance(const std::vector<std::unique_ptr<SignedDistanceMap>>& maps, const StructurePoints& moving, const Mat3& r, const Vec3& t)
+{
+    double sum = 0.0;
+    std::size_t n = 0;
+    for (std::size_t s = 0; s < maps.size(); ++s)
+        for (const auto& x : moving.boundary[s]) {
+            const double phi = maps[s]->value(r * x + t);
+            sum += phi * phi;
+            ++n;
+        }
+    return std::sqrt(sum / static_cast<double>(std::max<std::size_t>(1, n)));
+}
+
+Fit refine(const std::vector<std::unique_ptr<SignedDistanceMap>>& maps, const StructurePoints& moving, Mat3 r, Vec3 t)
+{
+    Fit f{r, t, rms_distance(maps, moving, r, t), 0};
+    double lambda = 1e-3;
+    for (int it = 0; it < 100; ++it) {
+        Eigen::Matrix<double, 6, 6> a = Eigen::Matrix<double, 6, 6>::Zero();
+        Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+        Vec3 centre = Vec3::Zero();
+        std::size_t count = 0;
+        for (std::size_t s = 0; s < maps.size(); ++s)
+            for (const auto& x : moving.boundary[s]) centre += f.rotation * x + f.translation, ++count;
+        centre /= static_cast<double>(count);
+        for (std::size_t s = 0; s < maps.size(); ++s)
+            for (const auto& x : moving.boundary[s]) {
+                const Vec3 y = f.rotation * x + f.translation;
+                Vec3 g;
+                const double phi = maps[s]->value_and_gradient(y, g);
+                Eigen::Matrix<double, 6, 1> row;
+                row << (y - centre).cross(g), g;
+                a += row * row.transpose();
+                b -= row * phi;
+            }
+        bool improved = false;
+        for (int tries = 0; tries < 10 && !improved; ++tries) {
+            Eigen::Matrix<double, 6, 6> damped = a;
+            damped.diagonal() += lambda * (a.diagonal().array() + 1e-9).matrix();
+            const Eigen::Matrix<double, 6, 1> step = damped.ldlt().solve(b);
+            const Vec3 omega = step.head<3>();
+            const Mat3 turn = omega.norm() > 0 ? Mat3(Eigen::AngleAxisd(omega.norm(), omega.normalized())) : Mat3::Identity();
+            const Mat3 r1 = turn * f.rotation;
+            const Vec3 t1 = turn * (f.translation - centre) + centre + Vec3(step.tail<3>());
+            const double rms = rms_distance(maps, moving, r1, t1);
+            if (rms < f.rms) {
+                const double gain = f.rms - rms;
+                f = {r1, t1, rms, it + 1};
+                lambda = std::max(1e-6, lambda / 3);
+                improved = true;
+                if (gain < 1e-4 * std::max(1.0, rms)) return f;
+            } else {
+                lambda *= 10;
+            }
+        }
+        if (!improved) break;
+    }
+    return f;
+}
+
+} // namespace
+
+SegmentationAlignment align_segmentations(const LabelVolume& fixed, const LabelVolume& moving, const std::vector<std::int32_t>& structures,
+                                          InitialAlignment mode)
+{
+    if (structures.empty()) fail("initial alignment: no structure to align");
+    SegmentationAlignment out;
+    out.mode = mode;
+    const StructurePoints f = collect(fixed, structures, "fixed");
+    const StructurePoints m = collect(moving, structures, "moving");
+    const detail::PrincipalFrame ff = detail::principal_frame(f.all), fm = detail::principal_frame(m.all);
+    const Vec3 cf = ff.centre, cm = fm.centre;
+    out.centroid_distance_mm = (cf - cm).norm();
+    std::vector<std::unique_ptr<SignedDistanceMap>> maps;
+    for (const auto label : structures)
+        maps.push_back(std::make_unique<SignedDistanceMap>(fixed, std::set<std::int32_t>{label}, "fixed structure " + std::to_string(label)));
+    out.rms_boundary_distance_before_mm = rms_distance(maps, m, Mat3::Identity(), Vec3::Zero());
+    if (mode == InitialAlignment::identity) {
+        out.rms_boundary_distance_mm = out.rms_boundary_distance_before_mm;
+        out.start = "identity";
+        return out;
+    }
+    out.translation = cf - cm;
+    out.start = "centroids";
+    if (mode == InitialAlignment::rigid) {
+        // Starts: centroids only; principal axes matched (four right-handed sign choices).
+        std::vector<std::pair<std::string, Mat3>> starts{{"centroids", Mat3::Identity()}};
+        for (int signs = 0; signs < 4; ++signs)
+            starts.push_back({"principal axes " + std::to_string(signs), ff.axes * detail::axis_flip(signs) * fm.axes.transpose()});
+        Fit best{Mat3::Identity(), Vec3::Zero(), std::numeric_limits<double>::infinity(), 0};
+        for (const auto& [name, r0] : starts) {
+            const Fit fit = refine(maps, m, r0, cf - r0 * cm);
+            logger()->debug("initial alignment: start {}: RMS boundary distance {:.3f} mm after {} iterations", name, fit.rms, fit.iterations);
+            // The centroid start wins ties: a symmetric shape's axes are a guess, its centroid is not.
+            if (!std::isfinite(best.rms) || fit.rms < 0.95 * best.rms) {
+                best = fit;
+                out.start = name;
+            }
+        }
+        out.rotation = best.rotation;
+        out.translation = best.translation;
+        out.iterations = best.iterations;
+    }
+    out.rotation_deg = Eigen::AngleAxisd(out.rotation).angle() * 180.0 / M_PI;
+    out.rms_boundary_distance_mm = rms_distance(maps, m, out.rotation, out.translation);
+    return out;
+}
+
+} // namespace physreg

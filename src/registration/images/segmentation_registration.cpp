@@ -1,0 +1,340 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+// Paper 002's estimation of boundary forces and Young's moduli (adjoint gradients, L-BFGS).
+#include "physreg/registration/images/segmentation_registration.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+
+#include <lbfgs.h>
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <map>
+
+namespace physreg {
+namespace {
+
+using FaceKey = std::array<std::int32_t, 3>;
+
+FaceKey face_key(std::int32_t a, std::int32_t b, std::int32_t c)
+{
+    FaceKey k{a, b, c};
+    std::sort(k.begin(), k.end());
+    return k;
+}
+constexpr int tet_faces[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+
+/// Nodes of the faces that occur once among the cells accepted by `in_set`.
+std::vector<std::int32_t> boundary_nodes_of(const VolumeMesh& mesh, const std::function<bool(std::size_t)>& in_set)
+{
+    std::map<FaceKey, int> count;
+    for (std::size_t c = 0; c < mesh.cell_count(); ++c) {
+        if (!in_set(c)) continue;
+        const auto cell = mesh.cell(c);
+        for (const auto& f : tet_faces) ++count[face_key(cell[static_cast<std::size_t>(f[0])], cell[static_cast<std::size_t>(f[1])], cell[static_cast<std::size_t>(f[2])])];
+    }
+    std::vector<std::uint8_t> on(mesh.node_count(), 0);
+    for (const auto& [key, n] : count)
+        if (n == 1)
+            for (auto v : key) on[static_cast<std::size_t>(v)] = 1;
+    std::vector<std::int32_t> nodes;
+    for (std::size_t v = 0; v < on.size(); ++v)
+        if (on[v]) nodes.push_back(static_cast<std::int32_t>(v));
+    return nodes;
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0)
+{
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+} // namespace
+
+std::vector<std::int32_t> outer_boundary_nodes(const VolumeMesh& mesh)
+{
+    if (mesh.cell_type != CellType::tetrahedron) fail("outer boundary: the mesh is not tetrahedral");
+    return boundary_nodes_of(mesh, [](std::size_t) { return true; });
+}
+
+SegmentationObjective::SegmentationObjective(const VolumeMesh& mesh, const std::vector<std::int32_t>& structure_labels,
+                                             std::vector<const SignedDistanceMap*> maps, const std::string& what)
+    : m_mesh(mesh), m_maps(std::move(maps))
+{
+    if (m_maps.size() != structure_labels.size()) fail("{}: {} distance maps for {} structures", what, m_maps.size(), structure_labels.size());
+    if (mesh.cell_type != CellType::tetrahedron) fail("{}: the mesh is not tetrahedral", what);
+    for (std::size_t j = 0; j < structure_labels.size(); ++j) {
+        if (!m_maps[j]) continue;
+        const auto label = structure_labels[j];
+        for (auto n : boundary_nodes_of(mesh, [&](std::size_t c) { return mesh.cell_labels[c] == label; })) {
+            m_nodes.push_back(n);
+            m_structures.push_back(static_cast<int>(j));
+        }
+    }
+    if (m_nodes.empty()) fail("{}: no structure boundary to match (no distance map given)", what);
+}
+
+double SegmentationObjective::evaluate(const Eigen::VectorXd& u, Eigen::VectorXd* gradient) const
+{
+    if (gradient) gradient->setZero(u.size());
+    double phi_sum = 0.0;
+    for (std::size_t t = 0; t < m_nodes.size(); ++t) {
+        const auto n = static_cast<std::size_t>(m_nodes[t]);
+        const Vec3 x = m_mesh.nodes[n] + Vec3(u[static_cast<Eigen::Index>(3 * n)], u[static_cast<Eigen::Index>(3 * n + 1)], u[static_cast<Eigen::Index>(3 * n + 2)]);
+        Vec3 g;
+        const double phi = m_maps[static_cast<std::size_t>(m_structures[t])]->value_and_gradient(x, g);
+        phi_sum += 0.5 * phi * phi;
+        if (gradient)
+            for (int c = 0; c < 3; ++c) (*gradient)[static_cast<Eigen::Index>(3 * n + static_cast<std::size_t>(c))] += phi * g[c];
+    }
+    return phi_sum;
+}
+
+double SegmentationObjective::rms_distance_mm(const Eigen::VectorXd& u) const
+{
+    return std::sqrt(2.0 * evaluate(u, nullptr) / static_cast<double>(m_nodes.size()));
+}
+
+std::vector<std::pair<double, double>> SegmentationObjective::per_structure_distance_mm(const Eigen::VectorXd& u) const
+{
+    std::vector<std::pair<double, double>> out(m_maps.size(), {0.0, 0.0});
+    std::vector<std::size_t> count(m_maps.size(), 0);
+    for (std::size_t t = 0; t < m_nodes.size(); ++t) {
+        const auto n = static_cast<std::size_t>(m_nodes[t]);
+        const auto s = static_cast<std::size_t>(m_structures[t]);
+        const Vec3 x = m_mesh.nodes[n] + Vec3(u[static_cast<Eigen::Index>(3 * n)], u[static_cast<Eigen::Index>(3 * n + 1)], u[static_cast<Eigen::Index>(3 * n + 2)]);
+        const double d = std::abs(m_maps[s]->value(x));
+        out[s].first += d;
+        out[s].second = std::max(out[s].second, d);
+        ++count[s];
+    }
+    for (std::size_t s = 0; s < out.size(); ++s)
+        if (count[s]) out[s].first /= static_cast<double>(count[s]);
+    return out;
+}
+
+std::vector<Vec3> SegmentationObjective::distance_vectors() const
+{
+    std::vector<Vec3> sum(m_mesh.node_count(), Vec3::Zero());
+    std::vector<int> count(m_mesh.node_count(), 0);
+    for (std::size_t t = 0; t < m_nodes.size(); ++t) {
+        const auto n = static_cast<std::size_t>(m_nodes[t]);
+        Vec3 g;
+        const double phi = m_maps[static_cast<std::size_t>(m_structures[t])]->value_and_gradient(m_mesh.nodes[n], g);
+        const double norm = g.norm();
+        if (norm > 1e-9) sum[n] -= phi * g / norm;
+        ++count[n];
+    }
+    for (std::size_t n = 0; n < sum.size(); ++n)
+        if (count[n]) sum[n] /= count[n];
+    return sum;
+}
+
+void SegmentationRegistrationOptions::validate() const
+{
+    if (alternation_iterations < 1) fail("segmentation registration: alternation iterations {} must be ≥ 1", alternation_iterations);
+    if (max_cycles < 1) fail("segmentation registration: max cycles {} must be ≥ 1", max_cycles);
+    if (!(relative_tolerance >= 0.0) || !std::isfinite(relative_tolerance)) fail("segmentation registration: relative tolerance {} must be ≥ 0", relative_tolerance);
+}
+
+BoundaryParametrisation parse_boundary_parametrisation(const std::string& text)
+{
+    if (text == "nodal-forces") return BoundaryParametrisation::nodal_forces;
+    if (text == "surface-displacement") return BoundaryParametrisation::surface_displacement;
+    fail("boundary parametrisation '{}': use nodal-forces or surface-displacement", text);
+}
+
+std::string to_string(BoundaryParametrisation p)
+{
+    return p == BoundaryParametrisation::nodal_forces ? "nodal-forces" : "surface-displacement";
+}
+
+SegmentationGradient evaluate_segmentation_gradient(const LinearElasticModel& model, const SegmentationObjective& objective,
+                                                    const std::vector<std::int32_t>& force_nodes, BoundaryParametrisation parametrisation,
+                                                    double force_scale_n_mm, const Eigen::VectorXd& x)
+{
+    const auto dofs = static_cast<Eigen::Index>(3 * model.node_count());
+    Eigen::VectorXd boundary = Eigen::VectorXd::Zero(dofs);
+    const bool forces = parametrisation == BoundaryParametrisation::nodal_forces;
+    for (std::size_t i = 0; i < force_nodes.size(); ++i)
+        for (int c = 0; c < 3; ++c)
+            boundary[3 * force_nodes[i] + c] = (forces ? force_scale_n_mm : 1.0) * x[static_cast<Eigen::Index>(3 * i) + c];
+    SegmentationGradient out;
+    if (forces)
+        model.solve(boundary, out.displacement_mm);
+    else
+        model.solve_prescribed(Eigen::VectorXd::Zero(dofs), boundary, out.displacement_mm);
+    Eigen::VectorXd g_u;
+    out.objective_mm2 = objective.evaluate(out.displacement_mm, &g_u);
+    model.solve(g_u, out.lambda); // zero at fixed dofs
+    out.d_force.resize(x.size());
+    if (forces) {
+        for (std::size_t i = 0; i < force_nodes.size(); ++i)
+            for (int c = 0; c < 3; ++c) out.d_force[static_cast<Eigen::Index>(3 * i) + c] = force_scale_n_mm * out.lambda[3 * force_nodes[i] + c];
+    } else {
+        Eigen::VectorXd k_lambda;
+        model.multiply(out.lambda, k_lambda);
+        for (std::size_t i = 0; i < force_nodes.size(); ++i)
+            for (int c = 0; c < 3; ++c) {
+                const auto d = 3 * force_nodes[i] + c;
+                out.d_force[static_cast<Eigen::Index>(3 * i) + c] = g_u[d] - k_lambda[d];
+            }
+    }
+    out.d_log_modulus.resize(model.structure_count());
+    for (std::size_t j = 0; j < model.structure_count(); ++j)
+        out.d_log_modulus[j] = -1e-6 * model.young_moduli_pa()[j] * model.structure_form(j, out.lambda, out.displacement_mm);
+    return out;
+}
+
+namespace {
+
+struct PhaseContext {
+    LinearElasticModel* model;
+    const SegmentationObjective* objective;
+    const std::vector<std::int32_t>* force_nodes;
+    BoundaryParametrisation parametrisation;
+    double scale;
+    Eigen::VectorXd* x;                 ///< force unknowns (fixed during the modulus phase)
+    std::vector<double> base_moduli;    ///< E = base · exp(y) in the modulus phase
+    std::vector<std::size_t> estimated; ///< structures of the modulus phase
+    int evaluations = 0;
+    bool modulus_phase = false;
+};
+
+lbfgsfloatval_t evaluate_phase(void* instance, const lbfgsfloatval_t* v, lbfgsfloatval_t* g, const int n, const lbfgsfloatval_t)
+{
+    auto& p = *static_cast<PhaseContext*>(instance);
+    ++p.evaluations;
+    if (!p.modulus_phase) {
+        const Eigen::Map<const Eigen::VectorXd> x(v, n);
+        const SegmentationGradient r = evaluate_segmentation_gradient(*p.model, *p.objective, *p.force_nodes, p.parametrisation, p.scale, x);
+        for (int i = 0; i < n; ++i) g[i] = r.d_force[i];
+        return r.objective_mm2;
+    }
+    std::vector<double> e = p.model->young_moduli_pa();
+    for (int i = 0; i < n; ++i) {
+        if (!std::isfinite(v[i]) || std::abs(v[i]) > 20.0) return std::numeric_limits<double>::infinity(); // E beyond e^±20: reject the trial
+        e[p.estimated[static_cast<std::size_t>(i)]] = p.base_moduli[p.estimated[static_cast<std::size_t>(i)]] * std::exp(v[i]);
+    }
+    p.model->set_young_moduli(e);
+    const SegmentationGradient r = evaluate_segmentation_gradient(*p.model, *p.objective, *p.force_nodes, p.parametrisation, p.scale, *p.x);
+    for (int i = 0; i < n; ++i) g[i] = r.d_log_modulus[p.estimated[static_cast<std::size_t>(i)]];
+    return r.objective_mm2;
+}
+
+int run_lbfgs(PhaseContext& context, Eigen::VectorXd& v, int iterations, double& fx)
+{
+    lbfgs_parameter_t parameters;
+    lbfgs_parameter_init(&parameters);
+    parameters.max_iterations = iterations;
+    parameters.epsilon = 1e-8;
+    parameters.past = 0;
+    parameters.max_linesearch = 20;
+    return lbfgs(static_cast<int>(v.size()), v.data(), &fx, evaluate_phase, nullptr, &context, &parameters);
+}
+
+} // namespace
+
+SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, const LinearElasticOptions& elastic,
+                                                     const SegmentationObjective& objective,
+                                                     const std::vector<std::int32_t>& force_nodes, const std::vector<double>& initial_moduli_pa,
+                                                     const SegmentationRegistrationOptions& options,
+                                                     const std::function<void(double, const std::string&)>& progress)
+{
+    options.validate();
+    if (force_nodes.empty()) fail("segmentation registration: no force node (every outer surface node is fixed)");
+    const auto t0 = std::chrono::steady_clock::now();
+    const BoundaryParametrisation mode = options.parametrisation;
+    LinearElasticOptions model_options = elastic;
+    if (mode == BoundaryParametrisation::surface_displacement) {
+        model_options.fixed_nodes.insert(model_options.fixed_nodes.end(), force_nodes.begin(), force_nodes.end());
+        std::sort(model_options.fixed_nodes.begin(), model_options.fixed_nodes.end());
+        model_options.fixed_nodes.erase(std::unique(model_options.fixed_nodes.begin(), model_options.fixed_nodes.end()), model_options.fixed_nodes.end());
+    }
+    LinearElasticModel model(mesh, model_options, "segmentation registration model");
+    model.set_young_moduli(initial_moduli_pa);
+    const double scale = model.mean_diagonal_n_mm();
+    const auto evaluate = [&](const Eigen::VectorXd& x) { return evaluate_segmentation_gradient(model, objective, force_nodes, mode, scale, x); };
+
+    SegmentationRegistrationResult result;
+    result.estimated.assign(model.structure_count(), 0);
+    std::vector<std::size_t> estimated;
+    if (options.estimate_moduli)
+        for (std::size_t j = 0; j < model.structure_count(); ++j)
+            if (!model.reference_structures()[j]) {
+                result.estimated[j] = 1;
+                estimated.push_back(j);
+            }
+
+    // Initial guess from the distance vectors of the force nodes.
+    const std::vector<Vec3> d = objective.distance_vectors();
+    Eigen::VectorXd x(static_cast<Eigen::Index>(3 * force_nodes.size()));
+    for (std::size_t i = 0; i < force_nodes.size(); ++i)
+        for (int c = 0; c < 3; ++c) x[static_cast<Eigen::Index>(3 * i) + c] = d[static_cast<std::size_t>(force_nodes[i])][c];
+    Eigen::VectorXd zero = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(3 * mesh.node_count()));
+    result.initial_objective_mm2 = objective.evaluate(zero, nullptr);
+    result.initial_rms_mm = objective.rms_distance_mm(zero);
+    int evaluations = 0;
+    if (mode == BoundaryParametrisation::nodal_forces) {
+        // F = k̄ d overshoots (every node pushes the whole body): the best of α = 1, ½, ¼, … 2⁻¹², or 0.
+        double best_alpha = 0.0, best = result.initial_objective_mm2;
+        for (int k = 0; k <= 12; ++k) {
+            const double alpha = std::ldexp(1.0, -k);
+            const double phi = evaluate(alpha * x).objective_mm2;
+            ++evaluations;
+            if (phi < best) {
+                best = phi;
+                best_alpha = alpha;
+            }
+        }
+        x *= best_alpha;
+    }
+
+    PhaseContext context{&model, &objective, &force_nodes, mode, scale, &x, model.young_moduli_pa(), estimated, evaluations, false};
+    double phi = evaluate(x).objective_mm2;
+    result.history.push_back({0, phi, std::sqrt(2.0 * phi / static_cast<double>(objective.term_count())), model.young_moduli_pa(), ++context.evaluations});
+    result.stop_reason = "cycle budget used";
+    for (int cycle = 1; cycle <= options.max_cycles; ++cycle) {
+        const double before = phi;
+        context.modulus_phase = false;
+        run_lbfgs(context, x, options.alternation_iterations, phi);
+        if (!estimated.empty()) {
+            context.modulus_phase = true;
+            context.base_moduli = model.young_moduli_pa();
+            Eigen::VectorXd y = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(estimated.size()));
+            run_lbfgs(context, y, options.alternation_iterations, phi);
+            std::vector<double> e = context.base_moduli;
+            for (std::size_t i = 0; i < estimated.size(); ++i) e[estimated[i]] *= std::exp(y[static_cast<Eigen::Index>(i)]);
+            model.set_young_moduli(e); // the line search may have left the factor at a trial point
+        }
+        phi = evaluate(x).objective_mm2;
+        ++context.evaluations;
+        result.history.push_back({cycle, phi, std::sqrt(2.0 * phi / static_cast<double>(objective.term_count())), model.young_moduli_pa(), context.evaluations});
+        if (progress)
+            progress(static_cast<double>(cycle) / options.max_cycles,
+                     fmt::format("cycle {}: rms distance {:.3f} mm", cycle, result.history.back().rms_distance_mm));
+        if (before - phi < options.relative_tolerance * before) {
+            result.stop_reason = fmt::format("a cycle lowered the objective by less than {} of it", options.relative_tolerance);
+            break;
+        }
+    }
+    const SegmentationGradient final_state = evaluate(x);
+    result.displacement_mm = final_state.displacement_mm;
+    // The boundary load: the nodal forces, or the reactions K u at the prescribed nodes.
+    Eigen::VectorXd k_u;
+    model.multiply(result.displacement_mm, k_u);
+    result.force_n = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(3 * mesh.node_count()));
+    for (auto n : force_nodes)
+        for (int c = 0; c < 3; ++c) result.force_n[3 * n + c] = k_u[3 * n + c];
+    result.young_moduli_pa = model.young_moduli_pa();
+    result.objective_mm2 = final_state.objective_mm2;
+    result.rms_distance_mm = objective.rms_distance_mm(result.displacement_mm);
+    result.evaluations = context.evaluations;
+    result.factorisations = model.factorisations();
+    result.factorisation_s = model.factorisation_seconds();
+    result.solve_s = model.solve_seconds();
+    result.seconds = seconds_since(t0);
+    return result;
+}
+
+} // namespace physreg
