@@ -25,6 +25,7 @@
 
 #include "physreg/phantom/dataset.hpp"
 #include "physreg/evaluation/tre.hpp"
+#include "physreg/figures/tre_chart.hpp"
 #include "physreg/field/displacement_sampling.hpp"
 #include "physreg/figures/slice_figure.hpp"
 #include "physreg/io/png.hpp"

@@ -9,6 +9,7 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/evaluation/tre.hpp"
+#include "physreg/figures/tre_chart.hpp"
 #include "physreg/field/displacement_sampling.hpp"
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/landmarks_io.hpp"

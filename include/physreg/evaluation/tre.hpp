@@ -4,7 +4,6 @@
 // by name, summarised over all landmarks, surface ones and internal ones (tumour + vessel), and
 // per type; CSV/JSON reports and a PNG chart.
 #include "physreg/core/landmark.hpp"
-#include "physreg/io/png.hpp"
 
 #include <filesystem>
 #include <string>
@@ -43,13 +42,5 @@ LandmarkSet rigid_landmark_registration(const LandmarkSet& rest, const LandmarkS
 std::string tre_stats_json(const TreReport& report);               ///< {"all": {...}, "surface": …}
 std::string tre_report_json(const TreReport& report);              ///< stats plus per-landmark rows
 void write_tre_csv(const std::filesystem::path& path, const TreReport& report); ///< atomic
-
-/// Bar chart: per landmark the error (surface green, tumour red, vessel blue) and the means of
-/// each group as lines; `series` lets several methods share one chart (grouped bars).
-struct TreSeries {
-    std::string label;
-    TreReport report;
-};
-RgbImage render_tre_chart(const std::vector<TreSeries>& series, const std::string& title);
 
 } // namespace physreg

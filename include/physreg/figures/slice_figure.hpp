@@ -4,7 +4,8 @@
 // predicted: red circles joined to their true position), so a person can check a state at a glance.
 #include "physreg/core/landmark.hpp"
 #include "physreg/figures/canvas.hpp"
-#include "physreg/phantom/abdominal_phantom.hpp"
+#include "physreg/image/image_geometry.hpp"
+#include "physreg/model/label_roles.hpp"
 
 #include <string>
 

@@ -9,30 +9,13 @@
 // phantom lies supine with its flat base at the posterior side, so tools press along +y.
 #include "physreg/image/image_geometry.hpp"
 #include "physreg/mechanics/elements/embedded_beams.hpp"
+#include "physreg/model/label_roles.hpp"
 
 #include <cstdint>
 #include <set>
 #include <string>
 
 namespace physreg {
-
-namespace phantom_label {
-constexpr std::uint16_t body = 1, liver = 2, lesion = 3, vessel = 4, bone = 5, kidney = 6;
-} // namespace phantom_label
-
-/// Which label values of a label map play which anatomical role. The liver is parenchyma +
-/// lesions + vessels; at least one parenchyma label must be present.
-struct LabelRoles {
-    std::set<std::int32_t> body, liver, lesion, vessel, bone, kidney;
-    bool is_liver_tissue(std::int32_t label) const { return liver.count(label) || lesion.count(label) || vessel.count(label); }
-    std::string role_of(std::int32_t label) const; ///< "liver", …, or "" for none
-    void validate(const std::string& what) const;  ///< a label in two roles, label 0, no liver label
-};
-
-/// The phantom's convention (labels 1…6 above).
-LabelRoles phantom_label_roles();
-/// "liver=2;lesion=3;vessel=4,7" → roles (unnamed roles stay empty); throws Error naming `option`.
-LabelRoles parse_label_roles(const std::string& text, const std::string& option);
 
 /// Measured facts of the CIRS 057A phantom: body ≈ 270 × 200 mm in cross-section, 130 mm long,
 /// on a flat base; liver ≈ 184 × 142 × 89 mm (LR × AP × SI) of three smooth lobes with an

@@ -7,10 +7,11 @@
 // Neo-Hookean, indenter contact), with deformed images, ITK displacement fields, VTU meshes,
 // partial intra-operative surfaces, segmentation pairs, pictures and a JSON manifest.
 #include "physreg/core/types.hpp"
-#include "physreg/mechanics/loads/loads.hpp"
+#include "physreg/model/loads.hpp"
 #include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/model/tissue_table.hpp"
 #include "physreg/phantom/abdominal_phantom.hpp"
+#include "physreg/io/dataset.hpp"
 #include "physreg/phantom/ground_truth.hpp"
 
 #include <filesystem>
@@ -88,35 +89,6 @@ struct PhantomSpec {
     static PhantomSpec preset_spec(const std::string& name);
     void validate() const;
 };
-
-/// What `physreg phantom` wrote: every path relative to the dataset folder.
-struct DatasetState {
-    std::string name;                              ///< "rest", "A"…"E", "insufflation", "push"
-    std::string kind;                              ///< rest, compression, insufflation, push
-    std::map<std::string, std::string> files;      ///< role → relative path (labels, intensity, …)
-    std::map<int, std::pair<std::string, std::string>> surfaces; ///< percentage → (PLY, CSV)
-    double max_displacement_mm = 0.0;
-    double depth_mm = 0.0;                         ///< compressions
-    /// Compressions: the tool, its path from first contact (load factor 0) to the final position (1).
-    std::optional<Indenter> tool;
-};
-
-struct PhantomDataset {
-    std::filesystem::path directory;
-    std::string generator_version;
-    std::uint64_t seed = 0;
-    std::string preset;
-    std::string ground_truth_element;              ///< e.g. "linear tetrahedra (CGAL Mesh_3), Mooney-Rivlin"
-    LabelRoles roles;
-    std::string tissues_file;                      ///< relative: the ground-truth model's tissue table
-    std::vector<DatasetState> states;              ///< rest first
-    const DatasetState& state(const std::string& name) const; ///< throws Error if absent
-    std::filesystem::path path(const std::string& relative) const { return directory / relative; }
-};
-
-/// Reads DIR/manifest.json; throws Error naming the file and key for a missing or malformed
-/// manifest, an unknown format version, or a listed file that does not exist.
-PhantomDataset read_phantom_dataset(const std::filesystem::path& directory);
 
 /// Figures of a finished run, for the caller's report (no timings are written into the dataset
 /// itself, so the same seed gives identical files).

@@ -10,7 +10,7 @@
 // - compressible Mooney–Rivlin, ν 0.495–0.497, moduli drawn per seed from stated ranges;
 // - static equilibrium by Newton's method (load steps, augmented-Lagrangian frictionless contact
 //   with the rigid tool on the smooth skin), validated against CalculiX on a small case.
-#include "physreg/mechanics/loads/loads.hpp"
+#include "physreg/model/loads.hpp"
 #include "physreg/mechanics/implicit/newton_solver.hpp"
 #include "physreg/mechanics/elements/tled_model.hpp"
 #include "physreg/mesh/faces.hpp"

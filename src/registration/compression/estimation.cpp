@@ -4,7 +4,7 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/io/landmarks_io.hpp"
-#include "physreg/phantom/dataset.hpp"
+#include "physreg/io/dataset.hpp"
 
 #include <nlopt.hpp>
 #include <omp.h>

@@ -2,7 +2,7 @@
 #include "physreg/registration/surface/surface_model.hpp"
 
 #include "physreg/core/error.hpp"
-#include "physreg/phantom/partial_surface.hpp"
+#include "physreg/mesh/labelled_boundary.hpp"
 
 #include <algorithm>
 #include <limits>

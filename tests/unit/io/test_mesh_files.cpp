@@ -3,7 +3,7 @@
 #include "physreg/io/gmsh.hpp"
 #include "physreg/io/mesh_io.hpp"
 #include "physreg/io/surface_io.hpp"
-#include "physreg/phantom/partial_surface.hpp"
+#include "physreg/io/point_cloud.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 #include "physreg/mesh/surface_extraction.hpp"
 #include "physreg/mesh/tet_split.hpp"

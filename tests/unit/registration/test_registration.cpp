@@ -5,6 +5,7 @@
 #include "test_support.hpp"
 
 #include "physreg/evaluation/tre.hpp"
+#include "physreg/figures/tre_chart.hpp"
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/phantom/dataset.hpp"

@@ -10,7 +10,7 @@
 // contributions in the same order whatever the thread count, and reductions are summed in fixed
 // blocks: results are bitwise identical for 1, 2 or more threads.
 #include "physreg/core/thread_governor.hpp"
-#include "physreg/mechanics/loads/loads.hpp"
+#include "physreg/model/loads.hpp"
 #include "physreg/mechanics/elements/tled_model.hpp"
 #include "physreg/mechanics/coupling/tissue_coupling.hpp"
 

@@ -17,7 +17,7 @@
 // stops converging: a stale factor turns Newton into the chord method, which along a smooth motion
 // needs one force evaluation and one pair of triangular solves per iteration.
 #include "physreg/mechanics/linear/linear_solver.hpp"
-#include "physreg/mechanics/loads/loads.hpp"
+#include "physreg/model/loads.hpp"
 #include "physreg/mechanics/elements/auxiliary_elements.hpp"
 #include "physreg/mechanics/implicit/stiffness_assembly.hpp"
 

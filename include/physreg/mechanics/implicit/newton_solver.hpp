@@ -17,7 +17,7 @@
 //   penetration_tolerance_mm. ε is contact_penalty_scale times the node's stiffness bound. The
 //   tangent includes the curvature of spheres and cylinders (−p ∇²g).
 #include "physreg/mechanics/linear/linear_solver.hpp"
-#include "physreg/mechanics/loads/loads.hpp"
+#include "physreg/model/loads.hpp"
 #include "physreg/mechanics/explicit/tled_solver.hpp"
 
 #include <string>

@@ -4,7 +4,7 @@
 // its own implicit solver against: the same nodes, elements, tissues and law, prescribed nodal
 // displacements, a static NLGEOM step. Used by the tests and by `physreg phantom`, which validates
 // its ground-truth discretisation on a small case and writes the figure into the manifest.
-#include "physreg/mechanics/loads/loads.hpp"
+#include "physreg/model/loads.hpp"
 #include "physreg/mechanics/materials/material.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
 #include "physreg/model/tissue_table.hpp"

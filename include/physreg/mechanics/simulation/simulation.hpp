@@ -5,7 +5,7 @@
 #include "physreg/image/image_geometry.hpp"
 #include "physreg/mechanics/implicit/backward_euler.hpp"
 #include "physreg/mechanics/implicit/newton_solver.hpp"
-#include "physreg/mechanics/loads/node_selection.hpp"
+#include "physreg/mechanics/node_selection.hpp"
 #include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
 

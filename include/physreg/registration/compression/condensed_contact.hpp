@@ -14,7 +14,7 @@
 // The law is small-strain linear elasticity (the tangent of the model's Neo-Hookean law at rest,
 // with its hourglass control and MLS coupling): exact for small tool travels, an approximation for
 // deep ones — bench condensed measures how far it lands from the nonlinear solution.
-#include "physreg/mechanics/loads/loads.hpp"
+#include "physreg/model/loads.hpp"
 #include "physreg/registration/compression/liver_model.hpp"
 
 #include <Eigen/Core>

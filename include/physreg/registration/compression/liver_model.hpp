@@ -10,12 +10,12 @@
 //                 coupling (paper 000 eqs. 1–5; see mechanics/coupling/tissue_coupling.hpp).
 #include "physreg/core/landmark.hpp"
 #include "physreg/image/image_geometry.hpp"
-#include "physreg/mechanics/loads/loads.hpp"
+#include "physreg/model/loads.hpp"
 #include "physreg/mechanics/coupling/tissue_coupling.hpp"
 #include "physreg/mechanics/implicit/static_solver.hpp"
 #include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/mesh/coarsen.hpp"
-#include "physreg/phantom/abdominal_phantom.hpp"
+#include "physreg/model/label_roles.hpp"
 
 #include <filesystem>
 #include <memory>

@@ -15,7 +15,7 @@
 // text describes (a unit test pins both properties).
 #include "physreg/core/types.hpp"
 #include "physreg/mesh/triangle_search.hpp"
-#include "physreg/phantom/partial_surface.hpp"
+#include "physreg/io/point_cloud.hpp"
 
 #include <array>
 #include <map>

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
-#include "physreg/mechanics/loads/loads.hpp"
+#include "physreg/model/loads.hpp"
 
 #include "physreg/core/error.hpp"
 

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
-#include "physreg/mechanics/loads/node_selection.hpp"
+#include "physreg/mechanics/node_selection.hpp"
 
 #include "physreg/core/error.hpp"
 #include "physreg/mesh/faces.hpp"
