@@ -11,6 +11,7 @@
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
+#include "physreg/registration/compression/condensed_coarse_to_fine.hpp"
 #include "physreg/registration/compression/condensed_contact.hpp"
 #include "physreg/registration/compression/enrichment.hpp"
 #include "physreg/registration/compression/estimation.hpp"
@@ -20,6 +21,7 @@
 #include <algorithm>
 #include <set>
 #include <chrono>
+#include <optional>
 #include <fstream>
 #include <iostream>
 #include <numeric>
@@ -161,7 +163,8 @@ void add_subcommand_bench(CLI::App& app)
 
     // bench condensed (issue 30).
     struct CondensedOptions : CommonOptions {
-        std::string dataset, parameters, states = "A,B,C,D,E", held_out = "D,E", output, nonlinear = "never";
+        std::string dataset, parameters, states = "A,B,C,D,E", held_out = "D,E", output, nonlinear = "never", database, match = "parameters",
+                    blend = "auto";
         ModelOptions model;
         int steps = 20;
         double margin_mm = 10.0;
@@ -180,6 +183,11 @@ void add_subcommand_bench(CLI::App& app)
                      "The model's own Neo-Hookean law at each compression's final depth: never (default: the linear law alone) or "
                      "relaxation (dynamic relaxation started from the condensed field, and from rest for comparison; the TRE is then "
                      "the nonlinear one)");
+    cond->add_option("--database", co->database,
+                     "Enrichment database (physreg enrich build): also coarse-to-fine on top of condensed contact — the coarse model "
+                     "condensed, the database matched, the landmarks' fine nodes synthesised — timed per stage");
+    cond->add_option("--match", co->match, "With --database: parameters (default) or field");
+    cond->add_option("--blend", co->blend, "With --database: auto or a number of blended conditions");
     cond->add_option("--candidate-margin", co->margin_mm, "Candidates: surface nodes within the tool's reach + this of a path, mm (default 10)");
     cond->add_option("-o,--output", co->output, "JSON report (also printed with --json)");
     cond->add_flag("--json", co->json, "Print the report on stdout");
@@ -202,6 +210,21 @@ void add_subcommand_bench(CLI::App& app)
         options.candidate_margin_mm = co->margin_mm;
         logger()->info("bench condensed: factorising the stiffness at rest and the candidates' compliance");
         CondensedContactModel condensed(loaded.model, tools, query, options);
+        // Coarse-to-fine on top (issue 30 item 3): the database's coarse model, condensed too.
+        std::optional<EnrichmentDatabase> db;
+        std::optional<LiverModel> coarse;
+        std::vector<NodeEmbedding> embedding;
+        std::optional<CondensedCoarseToFine> c2f;
+        int blend = 0;
+        const EnrichmentMatching how = parse_enrichment_matching(co->match);
+        if (!co->database.empty()) {
+            db = read_enrichment_database(co->database);
+            coarse = coarsen_liver_model(loaded.model, db->coarse_grid(), &embedding);
+            check_database_fits(*db, loaded.model, *coarse, "--database '" + co->database + "'");
+            blend = blend_size(co->blend, *db, *coarse, embedding, loaded.model);
+            logger()->info("bench condensed: the coarse model ({} nodes) condensed for coarse-to-fine", coarse->mesh.node_count());
+            c2f.emplace(loaded.model, *coarse, embedding, *db, tools, query, how, blend, options);
+        }
         const auto& pre = condensed.precomputation();
         json report;
         report["what"] = "time per update with condensed contact: new tool position → contact forces → the landmarks' nodes";
@@ -215,9 +238,12 @@ void add_subcommand_bench(CLI::App& app)
         report["targets"] = {{"high_resolution_ms", 100.0}, {"coarse_to_fine_ms", 10.0}};
         ProgressDisplay bar("bench condensed");
         std::vector<double> all_ms, all_contact, all_recovery, relax_ms;
-        std::vector<TreReport> tre_all, tre_held, tre_train, linear_all, linear_held, linear_train;
+        std::vector<TreReport> tre_all, tre_held, tre_train, linear_all, linear_held, linear_train, c2f_held, c2f_train;
+        std::vector<double> c2f_ms, c2f_contact, c2f_recovery, c2f_synthesis;
         for (std::size_t c = 0; c < cases.size(); ++c) {
             condensed.reset();
+            if (c2f) c2f->reset();
+            CondensedCoarseToFine::Update c2f_up;
             const Vec3 a = cases[c].tool.path.front(), b = cases[c].tool.path.back();
             std::vector<double> ms, contact, recovery;
             CondensedContactModel::Update up;
@@ -230,6 +256,14 @@ void add_subcommand_bench(CLI::App& app)
                 contact.push_back(up.contact_ms);
                 recovery.push_back(up.recovery_ms);
                 if (s == co->steps) linear_moved = move_landmarks(loaded.model, condensed.query_field_mm(), loaded.rest_landmarks);
+                if (c2f) {
+                    const EnrichmentCondition condition{"", a, (b - a).normalized(), (at - a).norm()};
+                    c2f_up = c2f->move_to(cases[c].tool, at, condition);
+                    c2f_ms.push_back(c2f_up.total_ms());
+                    c2f_contact.push_back(c2f_up.contact.contact_ms);
+                    c2f_recovery.push_back(c2f_up.contact.recovery_ms);
+                    c2f_synthesis.push_back(c2f_up.synthesis_ms);
+                }
                 bar.update(double(c * co->steps + s) / double(cases.size() * co->steps), fmt::format("{} step {}", cases[c].name, s));
             }
             LandmarkSet moved = move_landmarks(loaded.model, condensed.query_field_mm(), loaded.rest_landmarks);
@@ -268,6 +302,14 @@ void add_subcommand_bench(CLI::App& app)
                 {"tre_linear_update", json::parse(tre_stats_json(linear_all.back()))},
                 {"tre_landmarks_at_rest", json::parse(tre_stats_json(at_rest))}};
             if (!relaxation.is_null()) report["compressions"][cases[c].name]["relaxation"] = relaxation;
+            if (c2f) {
+                const TreReport t = compute_tre(move_landmarks(loaded.model, c2f->fine_field_mm(), loaded.rest_landmarks), cases[c].truth, cases[c].name);
+                (held.count(cases[c].name) ? c2f_held : c2f_train).push_back(t);
+                if (c2f_up.match.outside_range) logger()->warn("{}: outside the database's range: {}", cases[c].name, c2f_up.match.range_note);
+                report["compressions"][cases[c].name]["coarse_to_fine"] = {
+                    {"tre", json::parse(tre_stats_json(t))}, {"outside_database_range", c2f_up.match.outside_range},
+                    {"range_note", c2f_up.match.range_note}, {"final_nodes_in_contact", c2f_up.contact.active_nodes}};
+            }
         }
         bar.finish();
         report["summary"] = {{"ms_per_update", mean_of(all_ms)}, {"contact_ms", mean_of(all_contact)}, {"recovery_ms", mean_of(all_recovery)},
@@ -278,6 +320,23 @@ void add_subcommand_bench(CLI::App& app)
                              {"linear_update_tre", {{"training", json::parse(tre_stats_json(pool_tre(linear_train)))},
                                                     {"held_out", json::parse(tre_stats_json(pool_tre(linear_held)))}}},
                              {"relaxation_from_condensed_ms", relax_ms.empty() ? json(nullptr) : json(mean_of(relax_ms))}};
+        if (c2f) {
+            const auto& cp = c2f->coarse_model().precomputation();
+            report["coarse_to_fine"] = {
+                {"database", {{"file", co->database}, {"conditions", db->conditions.size()}, {"match", co->match}, {"blend", blend}}},
+                {"coarse_model", {{"nodes", coarse->mesh.node_count()}, {"hexahedra", coarse->mesh.cell_count()}}},
+                {"precomputation", {{"candidate_nodes", cp.candidate_nodes}, {"coarse_query_nodes", cp.query_nodes}, {"factorisation_s", cp.factorisation_s},
+                                    {"compliance_s", cp.compliance_s}, {"assembly_s", cp.assembly_s}}},
+                {"fine_nodes_synthesised", query.size()},
+                {"ms_per_update", {{"mean", mean_of(c2f_ms)}, {"max", *std::max_element(c2f_ms.begin(), c2f_ms.end())},
+                                   {"contact", mean_of(c2f_contact)}, {"recovery", mean_of(c2f_recovery)}, {"synthesis", mean_of(c2f_synthesis)}}},
+                {"training", json::parse(tre_stats_json(pool_tre(c2f_train)))},
+                {"held_out", json::parse(tre_stats_json(pool_tre(c2f_held)))}};
+            std::cerr << fmt::format("bench condensed, coarse-to-fine: precomputation {:.1f} s ({} coarse candidates); {:.3f} ms/update (contact {:.3f}, "
+                                     "recovery {:.3f}, synthesis {:.3f}); TRE training {:.3f} mm, held-out {:.3f} mm\n",
+                                     cp.assembly_s + cp.factorisation_s + cp.compliance_s, cp.candidate_nodes, mean_of(c2f_ms), mean_of(c2f_contact),
+                                     mean_of(c2f_recovery), mean_of(c2f_synthesis), pool_tre(c2f_train).all.mean_mm, pool_tre(c2f_held).all.mean_mm);
+        }
         std::cerr << fmt::format("bench condensed ({} threads): precomputation {:.1f} s (factor {:.1f} s, {} candidate nodes {:.1f} s); "
                                  "{:.2f} ms/update (contact {:.2f}, recovery {:.3f}); TRE at the final depth: training {:.3f} mm, held-out {:.3f} mm "
                                  "(linear update alone: {:.3f}, {:.3f} mm; nonlinear {}: {:.0f} ms per final state)\n",

@@ -49,6 +49,14 @@ if [ "$part" != datasets ]; then
 # The main job on the built-in phantom.
 expect_ok "demo --quick" "$physreg" --log-level warn demo --quick -o "$work/demo"
 grep -q "coarse-to-fine" "$work/out.txt" && grep -q "paper 000" "$work/out.txt" && pass || failed "demo prints the TRE table beside paper 000"
+python3 - "$work/demo/summary.json" <<'PY' && pass || failed "demo: condensed rows (issue 30) timed, held-out TRE below the landmarks at rest"
+import json, sys
+rows = {m["method"]: m for m in json.load(open(sys.argv[1]))["methods"]}
+rest = rows["landmarks left at rest"]["tre_held_out"]["all"]["mean_mm"]
+for name in ("condensed contact (issue 30)", "condensed coarse-to-fine"):
+    assert rows[name]["ms_per_update"] > 0, rows[name]
+    assert rows[name]["tre_held_out"]["all"]["mean_mm"] < rest, (name, rows[name], rest)
+PY
 for f in summary.json $html params.json enrichment.phe figures/tre.png figures/difference_D.png figures/slices_E_coarse_to_fine.png \
          registration/D_fine.vtu registration/E_homogeneous.vtu registration/D_landmarks_coarse_to_fine.csv phantom/manifest.json; do
   expect_file "$work/demo/$f"
@@ -599,6 +607,17 @@ for name, c in r["compressions"].items():
 d = r["compressions"]["D"]
 assert d["tre"]["all"]["mean_mm"] < d["tre_landmarks_at_rest"]["all"]["mean_mm"], d
 assert d["tre_linear_update"]["all"]["mean_mm"] < d["tre_landmarks_at_rest"]["all"]["mean_mm"], d
+PY
+# Coarse-to-fine on top (the database of the enrich checks above): timed per stage.
+expect_ok "bench condensed --database" "$physreg" --log-level warn bench condensed --dataset "$ph" --parameters "$work/params.json" \
+  --database "$work/db.phe" --states B,D --held-out D --steps 4 -o "$work/condensed_c2f.json"
+python3 - "$work/condensed_c2f.json" <<'PY' && pass || failed "bench condensed --database: coarse-to-fine timed per stage, TRE reported"
+import json, sys
+c = json.load(open(sys.argv[1]))["coarse_to_fine"]
+ms = c["ms_per_update"]
+assert ms["mean"] > 0 and ms["contact"] >= 0 and ms["recovery"] >= 0 and ms["synthesis"] > 0, ms
+assert c["precomputation"]["candidate_nodes"] > 0 and c["fine_nodes_synthesised"] > 0, c
+assert c["held_out"]["all"]["count"] > 0 and c["held_out"]["all"]["mean_mm"] > 0, c
 PY
 expect_error "bench condensed: bad --nonlinear" "--nonlinear must be never or relaxation" "$physreg" bench condensed --dataset "$ph" \
   --grid 27x20x13 --nonlinear newton -o "$work/c_bad.json"

@@ -96,6 +96,31 @@ std::vector<double> synthesize_fine_displacement(const VolumeMesh& coarse, const
     return u;
 }
 
+void synthesize_fine_subset(const VolumeMesh& coarse, const std::vector<double>& coarse_u, const std::vector<NodeEmbedding>& fine_nodes,
+                            const std::vector<Vec3>& fine_rest, const EnrichmentDatabase& db, const EnrichmentMatch& match,
+                            const std::vector<std::int32_t>& subset, std::vector<double>& fine_u)
+{
+    if (coarse_u.size() != 3 * coarse.node_count() || fine_u.size() != 3 * fine_rest.size() || fine_nodes.size() != fine_rest.size())
+        fail("enrichment synthesis: {} coarse values for {} nodes, {} fine values for {} fine nodes", coarse_u.size(), coarse.node_count(),
+             fine_u.size(), fine_rest.size());
+    if (match.conditions.empty() || match.conditions.size() != match.blend.size()) fail("enrichment synthesis: empty match");
+    for (const auto node : subset) {
+        if (node < 0 || static_cast<std::size_t>(node) >= fine_rest.size()) fail("enrichment synthesis: fine node {} out of range", node);
+        const auto j = static_cast<std::size_t>(node);
+        std::array<Vec3, 8> p;
+        Vec3 c;
+        element_nodes(coarse, coarse_u, fine_nodes[j].cell, p, c);
+        Vec3 x = c;
+        for (int k = 0; k < 8; ++k) {
+            double phi = 0.0; // the blend of the matched conditions' weights (blended_weights, for one node)
+            for (std::size_t m = 0; m < match.conditions.size(); ++m) phi += match.blend[m] * double(db.weights[match.conditions[m]][8 * j + static_cast<std::size_t>(k)]);
+            x += static_cast<double>(static_cast<float>(phi)) * (p[static_cast<std::size_t>(k)] - c);
+        }
+        const Vec3 d = x - fine_rest[j];
+        for (int k = 0; k < 3; ++k) fine_u[3 * j + static_cast<std::size_t>(k)] = d[k];
+    }
+}
+
 Index3 EnrichmentDatabase::coarse_grid() const
 {
     try {

@@ -8,6 +8,7 @@
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/mesh/point_location.hpp"
 #include "physreg/phantom/dataset.hpp"
+#include "physreg/registration/compression/condensed_coarse_to_fine.hpp"
 #include "physreg/registration/compression/enrichment.hpp"
 #include "physreg/registration/compression/estimation.hpp"
 
@@ -310,6 +311,62 @@ TEST(EnrichmentMatch, ExactConditionsRangeAndModelChecks)
                                          [] { ModelParameters p; p.region = ModelRegion::liver; p.grid = {36, 27, 12}; p.coupling = {900, 500}; return p; }(), "other");
     EXPECT_NE(test::error_message([&] { check_database_fits(db, other, t.coarse, "db"); }).find("other model parameters"), std::string::npos);
     EXPECT_NE(test::error_message([&] { check_database_fits(db, t.coarse, t.coarse, "db"); }).find("another fine mesh"), std::string::npos);
+}
+
+TEST(EnrichmentMatch, SubsetSynthesisAndCondensedCoarseToFine)
+{
+    const SmallBuild b;
+    const auto& t = levels();
+    const EnrichmentDatabase db = b.build(b.options);
+    // Eq. 10 on a subset of the fine nodes gives those nodes' values of the whole synthesis, bit for
+    // bit, and leaves the others.
+    EnrichmentCondition query = db.conditions[1];
+    query.depth_mm = 4.5; // between two stored depths: a blend of two conditions
+    const auto m = match_enrichment(db, EnrichmentMatching::parameters, 2, &query, {});
+    ASSERT_EQ(m.conditions.size(), 2u);
+    const std::vector<double> cu(db.coarse_displacement[1].begin(), db.coarse_displacement[1].end());
+    const auto whole = synthesize_fine_displacement(t.coarse.mesh, cu, t.embedding, t.fine.mesh.nodes, blended_weights(db, m));
+    std::vector<std::int32_t> subset;
+    for (std::size_t j = 0; j < t.fine.mesh.node_count(); j += 7) subset.push_back(static_cast<std::int32_t>(j));
+    std::vector<double> part(whole.size(), -99.0);
+    synthesize_fine_subset(t.coarse.mesh, cu, t.embedding, t.fine.mesh.nodes, db, m, subset, part);
+    for (std::size_t j = 0; j < t.fine.mesh.node_count(); ++j)
+        for (std::size_t c = 0; c < 3; ++c) {
+            if (j % 7 == 0) ASSERT_EQ(part[3 * j + c], whole[3 * j + c]) << "node " << j;
+            else ASSERT_EQ(part[3 * j + c], -99.0);
+        }
+    const std::vector<std::int32_t> beyond{static_cast<std::int32_t>(t.fine.mesh.node_count())};
+    EXPECT_NE(test::error_message([&] { synthesize_fine_subset(t.coarse.mesh, cu, t.embedding, t.fine.mesh.nodes, db, m, beyond, part); })
+                  .find("out of range"),
+              std::string::npos);
+    // Coarse-to-fine on condensed contact: the synthesised nodes are those of the whole synthesis
+    // from the condensed coarse model's full field, the tool pushes the liver, nothing penetrates.
+    Indenter tool = b.shape;
+    tool.name = "B";
+    tool.path = {query.contact_mm, query.contact_mm + 4.5 * query.direction};
+    CondensedCoarseToFine c2f(t.fine, t.coarse, t.embedding, db, {tool}, subset, EnrichmentMatching::parameters, 2);
+    CondensedCoarseToFine::Update up;
+    for (int s = 1; s <= 3; ++s) {
+        EnrichmentCondition at = query;
+        at.depth_mm = 1.5 * s;
+        up = c2f.move_to(tool, query.contact_mm + at.depth_mm * query.direction, at);
+    }
+    EXPECT_GT(up.contact.active_nodes, 0);
+    EXPECT_LE(up.contact.max_penetration_mm, 1e-3);
+    ASSERT_EQ(up.match.conditions, m.conditions);
+    const auto coarse_full = c2f.coarse_model().full_displacement_mm();
+    const auto expected = synthesize_fine_displacement(t.coarse.mesh, coarse_full, t.embedding, t.fine.mesh.nodes, blended_weights(db, up.match));
+    double largest = 0.0, difference = 0.0;
+    for (const auto j : subset)
+        for (std::size_t c = 0; c < 3; ++c) {
+            const auto i = 3 * static_cast<std::size_t>(j) + c;
+            largest = std::max(largest, std::abs(expected[i]));
+            difference = std::max(difference, std::abs(c2f.fine_field_mm()[i] - expected[i]));
+        }
+    EXPECT_GT(largest, 0.5); // mm: the tool (4.5 mm of travel) moved the liver
+    EXPECT_LT(difference, 1e-9);
+    std::printf("condensed coarse-to-fine: largest synthesised motion %.3f mm, against the whole synthesis %.2e mm; %.3f ms per update\n",
+                largest, difference, up.total_ms());
 }
 
 } // namespace

@@ -35,6 +35,15 @@ std::vector<double> synthesize_fine_displacement(const VolumeMesh& coarse, const
                                                  const std::vector<NodeEmbedding>& fine_nodes, const std::vector<Vec3>& fine_rest,
                                                  const std::vector<float>& phi);
 
+struct EnrichmentDatabase;
+struct EnrichmentMatch;
+/// Eq. 10 for some fine nodes only (`subset`, fine node ids), with the blended weights of the
+/// matched conditions: writes their displacements (mm) into `fine_u` (3 per fine node; the other
+/// entries are left as they are). The real-time path synthesises only the nodes it shows.
+void synthesize_fine_subset(const VolumeMesh& coarse, const std::vector<double>& coarse_u, const std::vector<NodeEmbedding>& fine_nodes,
+                            const std::vector<Vec3>& fine_rest, const EnrichmentDatabase& db, const EnrichmentMatch& match,
+                            const std::vector<std::int32_t>& subset, std::vector<double>& fine_u);
+
 /// One deformation condition of the database: where the tool entered, which way it pressed, how deep.
 struct EnrichmentCondition {
     std::string position;               ///< name of the entry position (e.g. "A")
