@@ -33,7 +33,7 @@ TEST(Mls, PartitionOfUnityAndExactLinearFields)
     options.support_radius_mm = Vec3(1.5, 1.5, 0.8);
     const Mat3 a = (Mat3() << 0.3, -1.2, 0.7, 2.0, 0.1, -0.4, 0.5, 0.9, 1.1).finished();
     const Vec3 b(3.0, -1.0, 2.5);
-    for (const Vec3 x : {Vec3(0, 0, 0), Vec3(0.7, -0.3, 0.2), Vec3(-1.1, 1.2, -0.4)}) {
+    for (const Vec3& x : {Vec3(0, 0, 0), Vec3(0.7, -0.3, 0.2), Vec3(-1.1, 1.2, -0.4)}) {
         const auto s = mls_shape_functions(x, all, points, options, "test");
         ASSERT_GE(s.nodes.size(), 4u);
         double sum = 0.0;

@@ -124,7 +124,9 @@ TEST(LiverModel, VariantsShareTheMeshAndPredictTheCompression)
         }
         ASSERT_GE(moved, 3);
         EXPECT_GT(agreement / moved, 0.5) << to_string(variant) << ": mean predicted displacement along the true one, mm";
-        if (variant == ModelVariant::coupled) EXPECT_GT(prediction.max_coupling_gap_mm, 0.0);
+        if (variant == ModelVariant::coupled) {
+            EXPECT_GT(prediction.max_coupling_gap_mm, 0.0);
+        }
     }
     // Paper 000's coupling (600 / 500 N/m) is soft: the coupled model differs from shared nodes.
     EXPECT_NE(tre[ModelVariant::coupled].all.mean_mm, tre[ModelVariant::shared_nodes].all.mean_mm);

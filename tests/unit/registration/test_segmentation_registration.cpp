@@ -99,8 +99,9 @@ TEST(LinearElasticity, CantileverSolveMatchesTheDirectProductAndSingularSystemsA
     model.solve(f, u);
     model.multiply(u, k_u);
     for (std::size_t n = 0; n < mesh.node_count(); ++n)
-        if (!model.fixed()[n])
+        if (!model.fixed()[n]) {
             for (int c = 0; c < 3; ++c) ASSERT_NEAR(k_u[3 * static_cast<Eigen::Index>(n) + c], f[3 * static_cast<Eigen::Index>(n) + c], 1e-9);
+        }
     double top = 0.0;
     for (std::size_t n = 0; n < mesh.node_count(); ++n)
         if (mesh.nodes[n].z() > 26.0) top = std::max(top, u[3 * static_cast<Eigen::Index>(n)]);

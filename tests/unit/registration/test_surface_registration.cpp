@@ -273,7 +273,9 @@ TEST(SurfaceRegistration, RobustRigidRefusesAPoseThatTearsTheSupportsAway)
     EXPECT_EQ(anchored.chosen_start, "anchored to the supports");
     EXPECT_LT(Eigen::AngleAxisd(anchored.chosen.rotation).angle() * 180 / std::numbers::pi, 15.0);
     for (const auto& c : anchored.candidates)
-        if (c.plausible) EXPECT_LE(c.support_motion_mm, held.support_tolerance_mm);
+        if (c.plausible) {
+            EXPECT_LE(c.support_motion_mm, held.support_tolerance_mm);
+        }
 }
 
 TEST(SurfaceRegistration, AdjointGradientEqualsFiniteDifferences)
