@@ -609,6 +609,18 @@ d = r["compressions"]["D"]
 assert d["tre"]["all"]["mean_mm"] < d["tre_landmarks_at_rest"]["all"]["mean_mm"], d
 assert d["tre_linear_update"]["all"]["mean_mm"] < d["tre_landmarks_at_rest"]["all"]["mean_mm"], d
 PY
+# register-compression --solver condensed: the linearised model through the same outputs.
+expect_ok "register-compression --solver condensed" "$physreg" --log-level warn register-compression --dataset "$ph" --grid 27x20x13 \
+  --state D --solver condensed -o "$work/reg_condensed"
+python3 - "$work/reg_condensed/summary.json" <<'PY' && pass || failed "register-compression --solver condensed: method, updates, TRE below the landmarks at rest"
+import json, sys
+s = json.load(open(sys.argv[1]))
+assert s["method"] == "condensed" and s["condensed"]["tool_updates"] == 20 and s["condensed"]["ms_per_update"] > 0, s.get("condensed")
+assert s["tre_against_dataset"]["all"]["mean_mm"] < s["tre_landmarks_at_rest"]["all"]["mean_mm"], s["tre_against_dataset"]
+PY
+expect_file "$work/reg_condensed/displacement.nii.gz"
+expect_error "estimate: --solver condensed is for register-compression" "not one of relaxation, newton" "$physreg" estimate --dataset "$ph" \
+  --train A,B --validate D --grid 27x20x13 --solver condensed -o "$work/est_condensed.json"
 # Coarse-to-fine on top (the database of the enrich checks above): timed per stage.
 expect_ok "bench condensed --database" "$physreg" --log-level warn bench condensed --dataset "$ph" --parameters "$work/params.json" \
   --database "$work/db.phe" --states B,D --held-out D --steps 4 -o "$work/condensed_c2f.json"

@@ -2,6 +2,7 @@
 #include "physreg/registration/compression/condensed_contact.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/core/interrupt.hpp"
 #include "physreg/mechanics/linear/linear_solver.hpp"
 #include "physreg/mechanics/implicit/stiffness_assembly.hpp"
 
@@ -328,6 +329,38 @@ std::vector<double> CondensedContactModel::full_displacement_mm() const
     std::vector<double> out(u.data(), u.data() + u.size());
     for (std::size_t d = 0; d < dofs; ++d)
         if (m_factor->constrained[d]) out[d] = 0.0;
+    return out;
+}
+
+CompressionPrediction predict_compression_condensed(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks, int steps,
+                                                    const std::string& what, CondensedPrecomputation* precomputation, double* ms_per_update)
+{
+    if (steps < 1) fail("{}: condensed contact needs ≥ 1 tool update (got {})", what, steps);
+    if (tool.path.size() < 2) fail("{}: the tool needs a path from first contact to the final position", what);
+    const auto start = std::chrono::steady_clock::now();
+    CompressionPrediction out;
+    try {
+        CondensedContactModel condensed(model, {tool}, {});
+        const Vec3 a = tool.path.front(), b = tool.path.back();
+        double update_ms = 0.0;
+        for (int s = 1; s <= steps; ++s) {
+            const auto up = condensed.move_to(tool, a + (double(s) / double(steps)) * (b - a));
+            update_ms += up.contact_ms + up.recovery_ms;
+        }
+        out.displacement_mm = condensed.full_displacement_mm();
+        if (precomputation) *precomputation = condensed.precomputation();
+        if (ms_per_update) *ms_per_update = update_ms / double(steps);
+    } catch (const Interrupted&) {
+        throw;
+    } catch (const Error& e) {
+        fail("{}: {}", what, e.what());
+    }
+    out.landmarks = move_landmarks(model, out.displacement_mm, rest_landmarks);
+    out.iterations = steps;
+    for (std::size_t n = 0; 3 * n + 2 < out.displacement_mm.size(); ++n)
+        out.max_displacement_mm = std::max(out.max_displacement_mm, Vec3(out.displacement_mm[3 * n], out.displacement_mm[3 * n + 1],
+                                                                          out.displacement_mm[3 * n + 2]).norm());
+    out.seconds = seconds_since(start);
     return out;
 }
 

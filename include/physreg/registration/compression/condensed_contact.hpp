@@ -20,6 +20,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 namespace physreg {
@@ -90,6 +91,15 @@ private:
     std::vector<double> m_query_u;
     CondensedPrecomputation m_pre;
 };
+
+/// A compression predicted by condensed contact (`register-compression --solver condensed`): the
+/// model linearised and factorised, the tool moved from first contact to its final position in
+/// `steps` updates, then the whole field by one back-substitution and the landmarks moved with it.
+/// `iterations` is the number of updates; `seconds` includes the precomputation. Throws Error as
+/// CondensedContactModel does (naming `what`) and for steps < 1.
+CompressionPrediction predict_compression_condensed(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks, int steps,
+                                                    const std::string& what, CondensedPrecomputation* precomputation = nullptr,
+                                                    double* ms_per_update = nullptr);
 
 /// Nodes within `radius_mm` of any of `points` (rest positions), sorted.
 std::vector<std::int32_t> nodes_near(const VolumeMesh& mesh, const std::vector<Vec3>& points, double radius_mm);
