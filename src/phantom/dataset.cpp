@@ -935,8 +935,16 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
     std::vector<std::exception_ptr> failures(compressions.size());
     const int solvers = std::max(1, std::min<int>(omp_get_max_threads(), static_cast<int>(compressions.size())));
     std::size_t finished = 0;
+    // Deepest first (more load steps, more Newton iterations): the last solve to start is then a
+    // short one and the two cores finish together (cirs057a: 600 s → ≈ 500 s for the five).
+    std::vector<long> order(compressions.size());
+    std::iota(order.begin(), order.end(), 0L);
+    std::stable_sort(order.begin(), order.end(), [&](long a, long b) {
+        return compressions[static_cast<std::size_t>(a)].depth_mm > compressions[static_cast<std::size_t>(b)].depth_mm;
+    });
 #pragma omp parallel for schedule(dynamic, 1) num_threads(solvers)
-    for (long c = 0; c < static_cast<long>(compressions.size()); ++c) {
+    for (long k = 0; k < static_cast<long>(compressions.size()); ++k) {
+        const long c = order[static_cast<std::size_t>(k)];
         try {
             solved_compressions[static_cast<std::size_t>(c)] = solve_compression(gt.body, spec, p, compressions[static_cast<std::size_t>(c)]);
         } catch (...) {

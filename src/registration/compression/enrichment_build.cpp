@@ -5,6 +5,7 @@
 
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
+#include "physreg/core/thread_governor.hpp"
 
 #include <nlohmann/json.hpp>
 #include <omp.h>
@@ -219,9 +220,8 @@ EnrichmentDatabase build_enrichment_database(const LiverModel& fine, const Liver
     std::vector<std::string> errors(mine.size());
     std::atomic<std::size_t> done{0}, resumed{0};
     std::mutex progress_lock;
-    const int threads = std::max(1, std::min<int>(static_cast<int>(mine.size()), omp_get_max_threads()));
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
-    for (std::size_t i = 0; i < mine.size(); ++i) {
+    // One sequence per thread; those left after the last whole round on the full team each.
+    for_each_task_packed(mine.size(), [&](std::size_t i) {
         const std::size_t s = mine[i];
         const std::vector<EnrichmentCondition> conditions(all.begin() + static_cast<long>(s * per_sequence),
                                                           all.begin() + static_cast<long>((s + 1) * per_sequence));
@@ -262,7 +262,7 @@ EnrichmentDatabase build_enrichment_database(const LiverModel& fine, const Liver
                              fmt::format("sequence {} ({} of {} here; {} conditions each)", conditions.front().position, finished, mine.size(),
                                          per_sequence));
         }
-    }
+    });
     for (const auto& e : errors)
         if (!e.empty()) fail("enrichment build: {}", e);
     if (resumed > 0) logger()->info("enrichment build: {} of {} sequences resumed from checkpoints", resumed.load(), mine.size());

@@ -5,6 +5,7 @@
 #include "physreg/core/error.hpp"
 
 #include <chrono>
+#include <optional>
 
 #include <algorithm>
 #include <cmath>
@@ -168,21 +169,25 @@ CoarseToFinePrediction predict_coarse_to_fine(const LiverModel& fine, const Live
 TrackingRun track_compression(const LiverModel& fine, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
                               const EnrichmentDatabase& db, const Indenter& tool, const LandmarkSet& rest_landmarks, int steps,
                               EnrichmentMatching how, int k, const PredictionOptions& options, const std::string& what,
-                              const std::function<void(int)>& on_step)
+                              const std::function<void(int)>& on_step, bool high_resolution)
 {
     if (steps < 1) fail("{}: steps must be ≥ 1 (got {})", what, steps);
     using clock = std::chrono::steady_clock;
     const Vec3 start = tool.path.front(), end = tool.path.back();
     const double depth = (end - start).norm();
     const Vec3 d = (end - start) / depth;
-    CompressionTracker high(fine, tool, options), low(coarse, tool, options);
+    std::optional<CompressionTracker> high;
+    if (high_resolution) high.emplace(fine, tool, options);
+    CompressionTracker low(coarse, tool, options);
     TrackingRun run;
     for (int s = 1; s <= steps; ++s) {
         const Vec3 position = start + depth * double(s) / double(steps) * d;
         const std::string step = fmt::format("{} step {}", what, s);
-        const auto h = high.move_to(position, step + " (high resolution)");
-        run.high_resolution_ms.push_back(1e3 * h.seconds);
-        run.high_resolution_iterations.push_back(h.iterations);
+        if (high) {
+            const auto h = high->move_to(position, step + " (high resolution)");
+            run.high_resolution_ms.push_back(1e3 * h.seconds);
+            run.high_resolution_iterations.push_back(h.iterations);
+        }
         const auto t0 = clock::now();
         const auto l = low.move_to(position, step + " (coarse)");
         const auto cu = low.displacement_mm();
@@ -197,8 +202,10 @@ TrackingRun track_compression(const LiverModel& fine, const LiverModel& coarse, 
         run.coarse_iterations.push_back(l.iterations);
         if (on_step) on_step(s);
     }
-    run.high_resolution_u = high.displacement_mm();
-    run.high_resolution_landmarks = move_landmarks(fine, run.high_resolution_u, rest_landmarks);
+    if (high) {
+        run.high_resolution_u = high->displacement_mm();
+        run.high_resolution_landmarks = move_landmarks(fine, run.high_resolution_u, rest_landmarks);
+    }
     return run;
 }
 

@@ -3,6 +3,7 @@
 
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
+#include "physreg/core/thread_governor.hpp"
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/io/dataset.hpp"
 
@@ -51,10 +52,9 @@ std::vector<std::pair<std::string, TreReport>> evaluate_cases(const LabelVolume&
     const LiverModel model = build_liver_model(rest_labels, roles, parameters, "rest labels");
     std::vector<std::pair<std::string, TreReport>> out(cases.size());
     std::vector<std::string> errors(cases.size());
-    // One case per thread; each solver then runs single-threaded (nested regions are inactive).
-    const int threads = std::max(1, std::min<int>(static_cast<int>(cases.size()), omp_get_max_threads()));
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
-    for (std::size_t c = 0; c < cases.size(); ++c) {
+    // One case per thread, each solver single-threaded; the cases left after the last whole round
+    // one after another on the full team.
+    for_each_task_packed(cases.size(), [&](std::size_t c) {
         try {
             PredictionOptions start = options;
             if (warm) start.initial_displacement_mm = (*warm)[c];
@@ -64,7 +64,7 @@ std::vector<std::pair<std::string, TreReport>> evaluate_cases(const LabelVolume&
         } catch (const std::exception& e) {
             errors[c] = e.what();
         }
-    }
+    });
     for (const auto& e : errors)
         if (!e.empty()) fail("{} (model parameters: {} {}, k_c,s-t {:.4g} N/m, k_c,s-v {:.4g} N/m, E tumour {:.4g} Pa, E vessel {:.4g} Pa, E body {:.4g} Pa)",
                              e, to_string(parameters.region), to_string(parameters.variant), parameters.coupling.parenchyma_tumour_n_per_m,

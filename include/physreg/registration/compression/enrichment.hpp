@@ -170,7 +170,8 @@ CoarseToFinePrediction predict_coarse_to_fine(const LiverModel& fine, const Live
 /// A compression followed as `steps` tool positions from first contact to the final depth, each
 /// update warm-started from the previous one, with the high-resolution model and coarse-to-fine
 /// (coarse equilibrium + matching + synthesis of every fine node and landmark): wall time per update
-/// and the landmarks at the final depth.
+/// and the landmarks at the final depth. With `high_resolution` false only coarse-to-fine runs (its
+/// high-resolution fields stay empty): for states whose high-resolution equilibrium is known already.
 struct TrackingRun {
     std::vector<double> high_resolution_ms, coarse_to_fine_ms;
     /// coarse_to_fine_ms split: coarse equilibrium, and matching + synthesis + landmarks.
@@ -183,7 +184,7 @@ struct TrackingRun {
 TrackingRun track_compression(const LiverModel& fine, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
                               const EnrichmentDatabase& db, const Indenter& tool, const LandmarkSet& rest_landmarks, int steps,
                               EnrichmentMatching how, int k, const PredictionOptions& options, const std::string& what,
-                              const std::function<void(int)>& on_step = {});
+                              const std::function<void(int)>& on_step = {}, bool high_resolution = true);
 
 /// Atomic write (temporary name, then rename).
 void write_enrichment_database(const std::filesystem::path& path, const EnrichmentDatabase& database);
