@@ -352,12 +352,11 @@ TEST(MechanicsImplicit, IterativeSolversMatchTheDirectSolverAlongAToolPath)
     EXPECT_GT(summaries[1].linear_iterations, 0);
 }
 
-TEST(MechanicsImplicit, AlgebraicMultigridSolvesLikeCholesky)
+namespace {
+// The tangent at rest of a block held at its base (identity rows there) and a downward load on
+// the free nodes: a symmetric positive definite system for the linear solvers.
+std::pair<SparseMatrix, Eigen::VectorXd> held_block_system(const TledModel& model, const VolumeMesh& mesh)
 {
-    // One tangent of a base-held block, solved by CHOLMOD and by CG + BoomerAMG with and without
-    // the rigid rotations in the interpolation; and an unconverged AMG solve is an error.
-    const VolumeMesh mesh = block_mesh(8, 8, 4, 1.0);
-    const TledModel model(mesh, one_tissue(3e3, 0.45), {});
     const StiffnessAssembler assembler(model);
     SparseMatrix k = assembler.make_matrix();
     std::vector<double> u(3 * model.node_count(), 0.0), f(u.size());
@@ -371,6 +370,17 @@ TEST(MechanicsImplicit, AlgebraicMultigridSolvesLikeCholesky)
     Eigen::VectorXd b = Eigen::VectorXd::Zero(k.cols());
     for (Eigen::Index i = 2; i < k.cols(); i += 3)
         if (!fixed[i]) b[i] = -1e-4;
+    return {std::move(k), std::move(b)};
+}
+} // namespace
+
+TEST(MechanicsImplicit, AlgebraicMultigridSolvesLikeCholesky)
+{
+    // One tangent of a base-held block, solved by CHOLMOD and by CG + BoomerAMG with and without
+    // the rigid rotations in the interpolation; and an unconverged AMG solve is an error.
+    const VolumeMesh mesh = block_mesh(8, 8, 4, 1.0);
+    const TledModel model(mesh, one_tissue(3e3, 0.45), {});
+    const auto [k, b] = held_block_system(model, mesh);
     Eigen::VectorXd reference, x;
     SymmetricSolver direct({LinearSolverKind::cholmod});
     direct.solve(k, b, reference);
@@ -398,19 +408,7 @@ TEST(MechanicsImplicit, CholeskyGivesTheSameBitsOnAnyThreadAndConcurrently)
     // (METIS's ordering draws from a global random state; the analyses take turns).
     const VolumeMesh mesh = block_mesh(10, 10, 8, 1.0);
     const TledModel model(mesh, one_tissue(3e3, 0.45), {});
-    const StiffnessAssembler assembler(model);
-    SparseMatrix k = assembler.make_matrix();
-    std::vector<double> u(3 * model.node_count(), 0.0), f(u.size());
-    assembler.assemble(u.data(), f.data(), &k);
-    std::vector<char> fixed(k.cols(), 0);
-    for (auto n : nodes_at(mesh, 2, 0.0))
-        for (int d = 0; d < 3; ++d) fixed[3 * n + d] = 1;
-    for (Eigen::Index c = 0; c < k.cols(); ++c)
-        for (SparseMatrix::InnerIterator it(k, c); it; ++it)
-            if (fixed[c] || fixed[it.row()]) it.valueRef() = it.row() == c ? 1.0 : 0.0;
-    Eigen::VectorXd b = Eigen::VectorXd::Zero(k.cols());
-    for (Eigen::Index i = 2; i < k.cols(); i += 3)
-        if (!fixed[i]) b[i] = -1e-4;
+    const auto [k, b] = held_block_system(model, mesh);
     const auto solve = [&] {
         SymmetricSolver s({LinearSolverKind::cholmod});
         Eigen::VectorXd x;
