@@ -30,9 +30,10 @@ struct SingleThreadedBlas {
 
 // Runs a CHOLMOD call where the libraries' own OpenMP regions stay inactive. Outside any parallel
 // region, CHOLMOD's supernodal factorisation opens a team of 4 for each large supernode, and with
-// the one-thread setting above libgomp created and destroyed those threads every time: 34 503
-// thread creations in one factorisation of a 27 k-node vector Laplacian, 1.5× the time (2.31 s
-// against 1.51 s for 192 k dofs), and 6× in the phantom's solves on OMP_NUM_THREADS=1. Inside an
+// the one-thread setting above libgomp created and destroyed those threads every time (34 503
+// thread creations in four factorisations of an 81 k-dof vector Laplacian); a factorisation of
+// 192 k dofs took 1.5× the time (2.31 s against 1.51 s), the phantom's solves on OMP_NUM_THREADS=1
+// 6× (small preset 165 s against 44 s in all). Inside an
 // active region of two threads (one works, the other waits at the barrier and then sleeps) the
 // nested regions run on the calling thread alone, as they do when the phantom solves two at once.
 template <typename Work>
