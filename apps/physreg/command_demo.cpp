@@ -325,7 +325,7 @@ void add_subcommand_demo(CLI::App& app)
         // weights: measured shares of this stage on cirs057a.
         const double homogeneous_share = 0.25, training_share = 0.03, held_out_share = (1.0 - homogeneous_share - 3 * training_share) / 2.0;
         bar.update(0.0, "homogeneous model on the training compressions");
-        const auto homogeneous_train = evaluate_cases(rest_labels, dataset.roles, homogeneous_parameters, rest_landmarks, train_cases, prediction);
+        const auto homogeneous_train = evaluate_cases(homogeneous, homogeneous_parameters, rest_landmarks, train_cases, prediction);
         double done_share = homogeneous_share;
         for (std::size_t c = 0; c < all_cases.size(); ++c) {
             const auto& vc = all_cases[c];

@@ -48,8 +48,14 @@ std::vector<std::pair<std::string, TreReport>> evaluate_cases(const LabelVolume&
                                                               const std::vector<CompressionCase>& cases, const PredictionOptions& options,
                                                               std::vector<std::vector<double>>* warm)
 {
+    return evaluate_cases(build_liver_model(rest_labels, roles, parameters, "rest labels"), parameters, rest_landmarks, cases, options, warm);
+}
+
+std::vector<std::pair<std::string, TreReport>> evaluate_cases(const LiverModel& model, const ModelParameters& parameters,
+                                                              const LandmarkSet& rest_landmarks, const std::vector<CompressionCase>& cases,
+                                                              const PredictionOptions& options, std::vector<std::vector<double>>* warm)
+{
     if (warm && warm->size() != cases.size()) fail("evaluate cases: {} warm starts for {} cases", warm->size(), cases.size());
-    const LiverModel model = build_liver_model(rest_labels, roles, parameters, "rest labels");
     std::vector<std::pair<std::string, TreReport>> out(cases.size());
     std::vector<std::string> errors(cases.size());
     // One case per thread, each solver single-threaded; the cases left after the last whole round

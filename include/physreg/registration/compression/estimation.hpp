@@ -82,6 +82,10 @@ std::vector<std::pair<std::string, TreReport>> evaluate_cases(const LabelVolume&
                                                               const ModelParameters& parameters, const LandmarkSet& rest_landmarks,
                                                               const std::vector<CompressionCase>& cases, const PredictionOptions& options,
                                                               std::vector<std::vector<double>>* warm = nullptr);
+/// The same with a model already built (its parameters are named in errors).
+std::vector<std::pair<std::string, TreReport>> evaluate_cases(const LiverModel& model, const ModelParameters& parameters,
+                                                              const LandmarkSet& rest_landmarks, const std::vector<CompressionCase>& cases,
+                                                              const PredictionOptions& options, std::vector<std::vector<double>>* warm = nullptr);
 
 /// Fits the free parameters of `initial` (none for homogeneous / shared-nodes without
 /// fit_moduli: then the model is just evaluated). `progress(fraction, message)` after each
