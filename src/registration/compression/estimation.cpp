@@ -125,6 +125,7 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
     std::vector<std::vector<double>> warm(train.size());
     double best_value = 0.0;
     std::vector<std::pair<std::string, TreReport>> best_reports;
+    std::vector<std::vector<double>> best_warm;
     auto objective = [&](const std::vector<double>& x) {
         const ModelParameters p = parameters_at(x);
         std::vector<std::pair<std::string, TreReport>> reports;
@@ -143,7 +144,7 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
         std::vector<TreReport> pooled;
         for (const auto& r : reports) pooled.push_back(r.second);
         const double value = pool_tre(pooled).all.mean_mm;
-        if (result.history.empty() || value < best_value) best_value = value, best_reports = reports;
+        if (result.history.empty() || value < best_value) best_value = value, best_reports = reports, best_warm = warm;
         result.history.push_back({p, value});
         if (progress)
             progress(std::min(1.0, double(result.history.size()) / double(budget)),
@@ -240,8 +241,13 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
         }
     }
     // The training reports of the best evaluation (NLopt returns the best point it evaluated).
-    result.train = best_value == result.objective_mm ? best_reports
-                                                     : evaluate_cases(rest_labels, roles, result.fitted, rest_landmarks, train, options.prediction);
+    if (best_value == result.objective_mm) {
+        result.train = best_reports;
+        result.train_displacement_mm = std::move(best_warm);
+    } else {
+        result.train_displacement_mm.assign(train.size(), {});
+        result.train = evaluate_cases(rest_labels, roles, result.fitted, rest_landmarks, train, options.prediction, &result.train_displacement_mm);
+    }
     if (!validation.empty()) result.validation = evaluate_cases(rest_labels, roles, result.fitted, rest_landmarks, validation, options.prediction);
     std::vector<TreReport> t, v;
     for (const auto& r : result.train) t.push_back(r.second);

@@ -422,6 +422,24 @@ LandmarkSet move_landmarks(const LiverModel& model, const std::vector<double>& d
     return moved;
 }
 
+std::vector<double> transfer_displacement(const LiverModel& from, const std::vector<double>& displacement_mm, const LiverModel& to)
+{
+    if (displacement_mm.size() != 3 * from.mesh.node_count())
+        fail("transfer displacement: {} values for {} nodes", displacement_mm.size(), from.mesh.node_count());
+    const auto where = embed_in_grid_mesh(from.mesh, to.mesh.nodes);
+    const double reach = from.cell_size_mm.maxCoeff();
+    std::vector<double> out(3 * to.mesh.node_count());
+    for (std::size_t n = 0; n < where.size(); ++n) {
+        NodeEmbedding e = where[n];
+        if (!e.inside && e.distance_mm > reach)
+            fail("transfer displacement: node {} lies {:.2f} mm outside the other model's mesh (more than one cell, {:.2f} mm)", n, e.distance_mm, reach);
+        e.natural = e.natural.cwiseMax(-1.0).cwiseMin(1.0);
+        const auto u = interpolate_nodal(from.mesh, e, displacement_mm, 3);
+        for (int d = 0; d < 3; ++d) out[3 * n + d] = u[d];
+    }
+    return out;
+}
+
 CompressionPrediction predict_compression(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks,
                                           const PredictionOptions& options, const std::string& what)
 {

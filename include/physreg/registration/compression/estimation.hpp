@@ -51,6 +51,9 @@ struct EstimationResult {
     double objective_mm = 0.0;
     std::vector<EstimationStep> history;
     std::vector<std::pair<std::string, TreReport>> train, validation; ///< per compression, at the fit
+    /// The training compressions' equilibria at the fit (3 per node, mm; in `train`'s order): warm
+    /// starts for other models on the same mesh.
+    std::vector<std::vector<double>> train_displacement_mm;
     TreReport train_pooled, validation_pooled;
     /// Baseline: the landmarks left where they are at rest (how far the compressions moved them).
     TreReport train_at_rest, validation_at_rest;

@@ -162,4 +162,9 @@ private:
 /// Moves landmarks with nodal displacements of the model (the interpolation predict_compression uses).
 LandmarkSet move_landmarks(const LiverModel& model, const std::vector<double>& displacement_mm, const LandmarkSet& rest_landmarks);
 
+/// A displacement of `from` carried to the nodes of `to` (the same region as another variant or
+/// grid): `from`'s field interpolated at `to`'s rest nodes, e.g. a warm start for `to`. Throws Error
+/// for a node of `to` more than one cell of `from` outside its mesh.
+std::vector<double> transfer_displacement(const LiverModel& from, const std::vector<double>& displacement_mm, const LiverModel& to);
+
 } // namespace physreg
