@@ -53,7 +53,7 @@ void add_subcommand_bench(CLI::App& app)
     auto* group = app.add_subcommand("bench", "Benchmarks of the registration pipeline (JSON)");
     group->require_subcommand(1);
     struct Options : CommonOptions {
-        std::string dataset, parameters, database, states = "A,B,C,D,E", held_out = "D,E", output, match = "parameters", blend = "auto";
+        std::string dataset, parameters, database, states = "A,B,C,D,E", held_out = "D,E", output, match = "parameters", blend = "auto", detail = "auto";
         ModelOptions model;
         int steps = 20;
     };
@@ -70,6 +70,7 @@ void add_subcommand_bench(CLI::App& app)
     sub->add_option("--steps", o->steps, "Tool positions from first contact to the final depth (default 20)");
     sub->add_option("--match", o->match, "parameters or field");
     sub->add_option("--blend", o->blend, "auto or a number of blended conditions");
+    sub->add_option("--detail-length", o->detail, "Share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²), the rest the coarse field: auto (leave-one-position-out best, default), inf (paper 000: all detail) or L in mm");
     sub->add_option("-o,--output", o->output, "JSON report (also printed with --json)");
     sub->add_flag("--json", o->json, "Print the report on stdout");
     sub->callback([o] {
@@ -82,6 +83,7 @@ void add_subcommand_bench(CLI::App& app)
         const LiverModel coarse = coarsen_liver_model(loaded.model, db.coarse_grid(), &embedding);
         check_database_fits(db, loaded.model, coarse, "--database '" + o->database + "'");
         const int k = blend_size(o->blend, db, coarse, embedding, loaded.model);
+        const double detail = detail_length(o->detail, db, coarse, embedding, loaded.model, how, k);
         const auto cases = compression_cases(loaded.dataset, split_names(o->states, "--states"));
         const PredictionOptions options = prediction_options(o->model);
         json report;
@@ -93,7 +95,8 @@ void add_subcommand_bench(CLI::App& app)
         report["fine_model"] = {{"nodes", loaded.model.mesh.node_count()}, {"hexahedra", loaded.model.mesh.cell_count()},
                                 {"variant", to_string(loaded.model.parameters.variant)}};
         report["coarse_model"] = {{"nodes", coarse.mesh.node_count()}, {"hexahedra", coarse.mesh.cell_count()}};
-        report["database"] = {{"file", o->database}, {"conditions", db.conditions.size()}, {"match", o->match}, {"blend", k}};
+        report["database"] = {{"file", o->database}, {"conditions", db.conditions.size()}, {"match", o->match}, {"blend", k},
+                              {"detail_length_mm", length_json(detail)}};
         report["targets"] = {{"coarse_to_fine_ms", 10.0}, {"high_resolution_ms", 100.0}, {"tre_gap_mm", 0.5}};
         ProgressDisplay bar("bench enrich");
         std::vector<double> all_hr, all_c2f, all_coarse, all_synthesis;
@@ -102,8 +105,8 @@ void add_subcommand_bench(CLI::App& app)
         const std::set<std::string> held(held_names.begin(), held_names.end());
         for (std::size_t c = 0; c < cases.size(); ++c) {
             const double depth = (cases[c].tool.path.back() - cases[c].tool.path.front()).norm();
-            const TrackingRun run = track_compression(loaded.model, coarse, embedding, db, cases[c].tool, loaded.rest_landmarks, o->steps, how, k,
-                                                      options, cases[c].name, [&](int s) {
+            const TrackingRun run = track_compression(loaded.model, coarse, embedding, db, cases[c].tool, loaded.rest_landmarks, o->steps, how,
+                                                      EnrichmentBlend(k, detail), options, cases[c].name, [&](int s) {
                                                           bar.update(double(c * o->steps + s) / double(cases.size() * o->steps),
                                                                      fmt::format("{} step {}", cases[c].name, s));
                                                       });
@@ -164,7 +167,7 @@ void add_subcommand_bench(CLI::App& app)
     // bench condensed (issue 30).
     struct CondensedOptions : CommonOptions {
         std::string dataset, parameters, states = "A,B,C,D,E", held_out = "D,E", output, nonlinear = "never", database, match = "parameters",
-                    blend = "auto";
+                    blend = "auto", detail = "auto";
         ModelOptions model;
         int steps = 20;
         double margin_mm = 10.0;
@@ -188,6 +191,7 @@ void add_subcommand_bench(CLI::App& app)
                      "condensed, the database matched, the landmarks' fine nodes synthesised — timed per stage");
     cond->add_option("--match", co->match, "With --database: parameters (default) or field");
     cond->add_option("--blend", co->blend, "With --database: auto or a number of blended conditions");
+    cond->add_option("--detail-length", co->detail, "With --database: share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²): auto (default), inf (paper 000) or L in mm");
     cond->add_option("--candidate-margin", co->margin_mm, "Candidates: surface nodes within the tool's reach + this of a path, mm (default 10)");
     cond->add_option("-o,--output", co->output, "JSON report (also printed with --json)");
     cond->add_flag("--json", co->json, "Print the report on stdout");
@@ -216,14 +220,16 @@ void add_subcommand_bench(CLI::App& app)
         std::vector<NodeEmbedding> embedding;
         std::optional<CondensedCoarseToFine> c2f;
         int blend = 0;
+        double detail = std::numeric_limits<double>::infinity();
         const EnrichmentMatching how = parse_enrichment_matching(co->match);
         if (!co->database.empty()) {
             db = read_enrichment_database(co->database);
             coarse = coarsen_liver_model(loaded.model, db->coarse_grid(), &embedding);
             check_database_fits(*db, loaded.model, *coarse, "--database '" + co->database + "'");
             blend = blend_size(co->blend, *db, *coarse, embedding, loaded.model);
+            detail = detail_length(co->detail, *db, *coarse, embedding, loaded.model, how, blend);
             logger()->info("bench condensed: the coarse model ({} nodes) condensed for coarse-to-fine", coarse->mesh.node_count());
-            c2f.emplace(loaded.model, *coarse, embedding, *db, tools, query, how, blend, options);
+            c2f.emplace(loaded.model, *coarse, embedding, *db, tools, query, how, EnrichmentBlend(blend, detail), options);
         }
         const auto& pre = condensed.precomputation();
         json report;
@@ -323,7 +329,8 @@ void add_subcommand_bench(CLI::App& app)
         if (c2f) {
             const auto& cp = c2f->coarse_model().precomputation();
             report["coarse_to_fine"] = {
-                {"database", {{"file", co->database}, {"conditions", db->conditions.size()}, {"match", co->match}, {"blend", blend}}},
+                {"database", {{"file", co->database}, {"conditions", db->conditions.size()}, {"match", co->match}, {"blend", blend},
+                              {"detail_length_mm", length_json(detail)}}},
                 {"coarse_model", {{"nodes", coarse->mesh.node_count()}, {"hexahedra", coarse->mesh.cell_count()}}},
                 {"precomputation", {{"candidate_nodes", cp.candidate_nodes}, {"coarse_query_nodes", cp.query_nodes}, {"factorisation_s", cp.factorisation_s},
                                     {"compliance_s", cp.compliance_s}, {"assembly_s", cp.assembly_s}}},

@@ -279,6 +279,8 @@ void add_subcommand_demo(CLI::App& app)
         write_enrichment_database(dir / "enrichment.phe", db);
         fs::remove_all(dir / "enrichment.phe.partial");
         const int blend = choose_blend_size(db, coarse.mesh, embedding, fine.mesh.nodes, 4);
+        // How far stored detail carries (leave one position out): D, E enter away from A, B, C.
+        const double detail_length = choose_detail_length(db, coarse.mesh, embedding, fine.mesh.nodes, EnrichmentMatching::parameters, blend);
         const double database_s = seconds_since(t);
         const auto database_bytes = fs::file_size(dir / "enrichment.phe");
 
@@ -316,7 +318,8 @@ void add_subcommand_demo(CLI::App& app)
         logger()->info("condensed contact: {} candidate nodes, precomputed in {:.1f} s", condensed.precomputation().candidate_nodes,
                        condensed.precomputation().assembly_s + condensed.precomputation().factorisation_s + condensed.precomputation().compliance_s);
         // Coarse-to-fine on top: the coarse model condensed the same way, the landmarks' fine nodes synthesised.
-        CondensedCoarseToFine condensed_c2f(fine, coarse, embedding, db, session_tools, query, EnrichmentMatching::parameters, blend);
+        CondensedCoarseToFine condensed_c2f(fine, coarse, embedding, db, session_tools, query, EnrichmentMatching::parameters,
+                                            EnrichmentBlend(blend, detail_length));
         ProgressDisplay bar("registration");
         // Training states need TRE only: the high-resolution equilibria are the estimation's own at
         // the fitted parameters (same model, tool and tolerance), the homogeneous model is solved at
@@ -338,7 +341,7 @@ void add_subcommand_demo(CLI::App& app)
             const bool held_out = c >= train_cases.size();
             const double share = held_out ? held_out_share : training_share;
             const TrackingRun run = track_compression(fine, coarse, embedding, db, vc.tool, rest_landmarks, track_steps, EnrichmentMatching::parameters,
-                                                      blend, prediction, vc.name, [&](int s) {
+                                                      EnrichmentBlend(blend, detail_length), prediction, vc.name, [&](int s) {
                                                           bar.update(done_share + share * 0.5 * double(s) / double(track_steps),
                                                                      fmt::format("{} step {}", vc.name, s));
                                                       }, /*high_resolution=*/held_out);
@@ -441,7 +444,9 @@ void add_subcommand_demo(CLI::App& app)
                       render_orthogonal_slices(rest_intensity, rest_label_image, dataset.roles, {}, {}, figure).image());
             per_state[vc.name] = {{"max_difference_high_resolution_vs_coarse_to_fine_mm", largest},
                                   {"matched_conditions", run.last_match.conditions.size()},
-                                  {"outside_database_range", run.last_match.outside_range}};
+                                  {"outside_database_range", run.last_match.outside_range},
+                                  {"nearest_stored_position_mm", run.last_match.nearest_position_mm},
+                                  {"detail_share", run.last_match.detail}};
         }
         bar.finish();
         const double registration_s = seconds_since(t);
@@ -480,8 +485,9 @@ void add_subcommand_demo(CLI::App& app)
                             fit.fitted.coupling.parenchyma_tumour_n_per_m, fit.fitted.coupling.parenchyma_vessel_n_per_m, fit.fitted.body_young_pa,
                             fit.at_bound.empty() ? "" : fmt::format(" (AT A BOUND: {})", fmt::join(fit.at_bound, ", ")), fit.train_pooled.all.mean_mm,
                             pool_tre(methods[1].tre).all.mean_mm);
-        text += fmt::format("landmarks left at rest (how far D, E moved them): {:.3f} mm; enrichment database {} conditions, {:.1f} MB, blend {}\n",
-                            pool_tre(methods[4].tre).all.mean_mm, db.conditions.size(), double(database_bytes) / 1e6, blend);
+        text += fmt::format("landmarks left at rest (how far D, E moved them): {:.3f} mm; enrichment database {} conditions, {:.1f} MB, blend {}, "
+                            "detail length {} mm\n",
+                            pool_tre(methods[4].tre).all.mean_mm, db.conditions.size(), double(database_bytes) / 1e6, blend, detail_length);
         text += fmt::format("time: phantom {:.0f} s{}, estimation {:.0f} s, database {:.0f} s, registration {:.0f} s; total {:.0f} s\n", phantom_s,
                             reuse ? " (reused)" : "", estimate_s, database_s, registration_s, total_s);
         text += fmt::format("outputs in '{}': registration/*.vtu (ParaView), figures/*.png, params.json, enrichment.phe, phantom/ (3D Slicer: "
@@ -500,7 +506,8 @@ void add_subcommand_demo(CLI::App& app)
                         {"train_tre", json::parse(tre_stats_json(fit.train_pooled))},
                         {"validation_tre", json::parse(tre_stats_json(pool_tre(methods[1].tre)))},
                         {"validation_landmarks_at_rest", json::parse(tre_stats_json(pool_tre(methods[4].tre)))},
-                        {"database", {{"conditions", db.conditions.size()}, {"bytes", database_bytes}, {"blend", blend}}},
+                        {"database", {{"conditions", db.conditions.size()}, {"bytes", database_bytes}, {"blend", blend},
+                                      {"detail_length_mm", std::isinf(detail_length) ? json("inf") : json(detail_length)}}},
                         {"per_state", per_state},
                         {"meshing_blocks", blocks},
                         {"seconds", {{"phantom", phantom_s}, {"phantom_reused", reuse}, {"estimation", estimate_s}, {"database", database_s},

@@ -209,7 +209,11 @@ void add_subcommand_enrich(CLI::App& app)
         const auto bytes = fs::file_size(b->output);
         json summary = {{"database", b->output},
                         {"conditions", db.conditions.size()},
-                        {"positions", names},
+                        {"positions", [&] {
+                             std::vector<std::string> stored;
+                             for (const auto& position : plan.positions) stored.push_back(position.name);
+                             return stored;
+                         }()},
                         {"orientations", plan.orientations},
                         {"depths_mm", plan.depths_mm},
                         {"fine_nodes", db.fine_nodes},
@@ -226,7 +230,7 @@ void add_subcommand_enrich(CLI::App& app)
     });
 
     struct ApplyOptions : CommonOptions {
-        std::string database, dataset, state, parameters, output, match = "parameters", blend = "auto";
+        std::string database, dataset, state, parameters, output, match = "parameters", blend = "auto", detail = "auto";
         ModelOptions model;
         double field_spacing = 1.0;
         bool replace = false;
@@ -241,6 +245,7 @@ void add_subcommand_enrich(CLI::App& app)
     add_model_options(apply, a->model);
     apply->add_option("--match", a->match, "parameters (tool position, direction, depth; paper 000) or field (coarse displacement similarity)");
     apply->add_option("--blend", a->blend, "Conditions blended: auto (leave-one-out best of 1…4) or a number");
+    apply->add_option("--detail-length", a->detail, "Share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²), the rest the coarse field: auto (leave-one-position-out best, default), inf (paper 000: all detail) or L in mm");
     apply->add_option("--field-spacing", a->field_spacing, "Voxel size of the displacement field, mm (default 1)");
     apply->add_option("-o,--output", a->output, "Output directory (created)")->required();
     apply->add_flag("--force", a->replace, "Replace an existing output directory (only once the new one is complete)");
@@ -256,9 +261,11 @@ void add_subcommand_enrich(CLI::App& app)
         const auto cases = compression_cases(loaded.dataset, {a->state});
         std::vector<double> loo;
         const int k = blend_size(a->blend, db, coarse, embedding, loaded.model, &loo);
+        std::vector<std::pair<double, double>> detail_loo;
+        const double detail = detail_length(a->detail, db, coarse, embedding, loaded.model, how, k, &detail_loo);
         StagedDirectory staging(a->output, a->replace);
-        const auto prediction = predict_coarse_to_fine(loaded.model, coarse, embedding, db, cases[0].tool, loaded.rest_landmarks, how, k,
-                                                       prediction_options(a->model), "compression " + a->state);
+        const auto prediction = predict_coarse_to_fine(loaded.model, coarse, embedding, db, cases[0].tool, loaded.rest_landmarks, how,
+                                                       EnrichmentBlend(k, detail), prediction_options(a->model), "compression " + a->state);
         if (prediction.match.outside_range)
             logger()->warn("compression {} lies outside the database's range: {}; the result is extrapolated from the nearest stored "
                            "conditions", a->state, prediction.match.range_note);
@@ -281,6 +288,14 @@ void add_subcommand_enrich(CLI::App& app)
                         {"match", a->match},
                         {"blend_size", k},
                         {"leave_one_out_error_mm_per_blend_size", loo},
+                        {"detail_length_mm", length_json(detail)},
+                        {"detail_share", prediction.match.detail},
+                        {"leave_one_position_out_error_mm_per_detail_length", [&] {
+                             json rows = json::array();
+                             for (const auto& [length, error] : detail_loo) rows.push_back({{"detail_length_mm", length_json(length)}, {"error_mm", error}});
+                             return rows;
+                         }()},
+                        {"nearest_stored_position_mm", prediction.match.nearest_position_mm},
                         {"matched", matched},
                         {"outside_range", prediction.match.outside_range},
                         {"range_note", prediction.match.range_note},

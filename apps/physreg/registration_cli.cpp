@@ -130,4 +130,19 @@ int blend_size(const std::string& text, const EnrichmentDatabase& db, const Live
     return k;
 }
 
+double detail_length(const std::string& text, const EnrichmentDatabase& db, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
+                     const LiverModel& fine, EnrichmentMatching how, int k, std::vector<std::pair<double, double>>* loo_mm)
+{
+    if (text == "auto") return choose_detail_length(db, coarse.mesh, fine_nodes, fine.mesh.nodes, how, k, loo_mm);
+    if (text == "inf") return std::numeric_limits<double>::infinity();
+    const auto number = parse_number(text);
+    if (!number || !(*number >= 0.0)) fail("--detail-length: '{}' is not auto, inf or a length ≥ 0 mm", text);
+    return *number;
+}
+
+nlohmann::json length_json(double length_mm)
+{
+    return std::isinf(length_mm) ? nlohmann::json("inf") : nlohmann::json(length_mm);
+}
+
 } // namespace physreg::cli

@@ -37,6 +37,13 @@ std::string tre_line(const TreReport& r);
 /// number ≥ 1; Error otherwise.
 int blend_size(const std::string& text, const EnrichmentDatabase& db, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
                const LiverModel& fine, std::vector<double>* loo_mm = nullptr);
+/// --detail-length: "auto" (leave-one-sequence-out best over the database, choose_detail_length;
+/// errors per length in `loo_mm`), "inf" (paper 000: the stored detail at any distance) or a
+/// number ≥ 0 mm; Error otherwise.
+double detail_length(const std::string& text, const EnrichmentDatabase& db, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
+                     const LiverModel& fine, EnrichmentMatching how, int k, std::vector<std::pair<double, double>>* loo_mm = nullptr);
+/// A length for JSON: the number, or "inf".
+nlohmann::json length_json(double length_mm);
 
 /// The dataset's rest state and the model: from `parameters_file` (checked against the mesh it
 /// builds: "fitted on another mesh") or from the model options.

@@ -29,13 +29,13 @@ std::vector<std::int32_t> coarse_corners(const LiverModel& coarse, const std::ve
 
 CondensedCoarseToFine::CondensedCoarseToFine(const LiverModel& fine, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
                                              const EnrichmentDatabase& db, const std::vector<Indenter>& session_tools,
-                                             std::vector<std::int32_t> fine_query, EnrichmentMatching how, int blend,
+                                             std::vector<std::int32_t> fine_query, EnrichmentMatching how, const EnrichmentBlend& blend,
                                              const CondensedContactOptions& options)
     : m_fine(fine), m_coarse_model(coarse), m_fine_nodes(fine_nodes), m_db(db), m_fine_query(std::move(fine_query)), m_how(how), m_blend(blend),
       m_coarse(coarse, session_tools, coarse_corners(coarse, fine_nodes, m_fine_query), options),
       m_fine_u(3 * fine.mesh.node_count(), 0.0)
 {
-    if (blend < 1) fail("condensed coarse-to-fine: blend size must be ≥ 1 (got {})", blend);
+    blend.validate("condensed coarse-to-fine");
     if (fine_nodes.size() != fine.mesh.node_count())
         fail("condensed coarse-to-fine: {} embedded fine nodes for a fine mesh of {}", fine_nodes.size(), fine.mesh.node_count());
 }

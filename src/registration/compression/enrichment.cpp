@@ -111,9 +111,11 @@ void synthesize_fine_subset(const VolumeMesh& coarse, const std::vector<double>&
         Vec3 c;
         element_nodes(coarse, coarse_u, fine_nodes[j].cell, p, c);
         Vec3 x = c;
+        const auto n = hex_shape_functions(fine_nodes[j].natural);
         for (int k = 0; k < 8; ++k) {
             double phi = 0.0; // the blend of the matched conditions' weights (blended_weights, for one node)
             for (std::size_t m = 0; m < match.conditions.size(); ++m) phi += match.blend[m] * double(db.weights[match.conditions[m]][8 * j + static_cast<std::size_t>(k)]);
+            if (match.detail < 1.0) phi = match.detail * phi + (1.0 - match.detail) * n[static_cast<std::size_t>(k)];
             x += static_cast<double>(static_cast<float>(phi)) * (p[static_cast<std::size_t>(k)] - c);
         }
         const Vec3 d = x - fine_rest[j];

@@ -15,6 +15,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <tuple>
 #include <omp.h>
 
 namespace physreg {
@@ -367,6 +368,114 @@ TEST(EnrichmentMatch, SubsetSynthesisAndCondensedCoarseToFine)
     EXPECT_LT(difference, 1e-9);
     std::printf("condensed coarse-to-fine: largest synthesised motion %.3f mm, against the whole synthesis %.2e mm; %.3f ms per update\n",
                 largest, difference, up.total_ms());
+}
+
+TEST(EnrichmentMatch, RangeIsTheStoredPositionsSpanAndDetailFallsWithDistance)
+{
+    // Four entry points on a 20 mm square (pressing along +y), depths 3 and 6 mm: conditions only,
+    // as parameter matching reads nothing else.
+    EnrichmentDatabase db;
+    for (const auto& [name, x, z] : std::vector<std::tuple<std::string, double, double>>{{"P1", 0, 0}, {"P2", 20, 0}, {"P3", 0, 20}, {"P4", 20, 20}})
+        for (const double depth : {3.0, 6.0}) db.conditions.push_back({name, Vec3(x, 0, z), Vec3::UnitY(), depth});
+    // The square's centre is 14.1 mm from every stored position but inside their span: interpolation.
+    const EnrichmentCondition centre{"", Vec3(10, 0, 10), Vec3::UnitY(), 4.0};
+    const auto inside = match_enrichment(db, EnrichmentMatching::parameters, EnrichmentBlend(2, 4.0), &centre, {});
+    EXPECT_FALSE(inside.outside_range) << inside.range_note;
+    EXPECT_NEAR(inside.nearest_position_mm, std::sqrt(200.0), 1e-9);
+    // Detail share 1 / (1 + (d/L)²) with d the nearest condition's parameter distance (14.14 + 1 mm).
+    const double d = std::sqrt(200.0) + 1.0;
+    EXPECT_NEAR(inside.detail, 1.0 / (1.0 + (d / 4.0) * (d / 4.0)), 1e-12);
+    EXPECT_EQ(match_enrichment(db, EnrichmentMatching::parameters, 2, &centre, {}).detail, 1.0); // paper 000: ∞
+    EXPECT_EQ(EnrichmentBlend(1, 0.0).detail_share(0.5), 0.0);
+    EXPECT_EQ(EnrichmentBlend(1, 0.0).detail_share(0.0), 1.0); // an exact hit keeps its detail
+    // 12 mm beyond the square's edge (still 12 mm from P2): extrapolation, saying how far out.
+    const EnrichmentCondition beyond{"", Vec3(32, 0, 10), Vec3::UnitY(), 4.0};
+    const auto out = match_enrichment(db, EnrichmentMatching::parameters, 1, &beyond, {});
+    EXPECT_TRUE(out.outside_range);
+    EXPECT_NE(out.range_note.find("12.0 mm outside the stored positions' span"), std::string::npos) << out.range_note;
+    // Within 5 mm of the span: inside. A point on the square's own line of positions: inside.
+    EXPECT_FALSE(match_enrichment(db, EnrichmentMatching::parameters, 1, &centre, {}).outside_range);
+    const EnrichmentCondition near_edge{"", Vec3(24, 0, 10), Vec3::UnitY(), 4.0};
+    EXPECT_FALSE(match_enrichment(db, EnrichmentMatching::parameters, 1, &near_edge, {}).outside_range);
+    EXPECT_NE(test::error_message([&] { match_enrichment(db, EnrichmentMatching::parameters, EnrichmentBlend(1, -1.0), &centre, {}); })
+                  .find("detail length must be ≥ 0 mm"),
+              std::string::npos);
+}
+
+TEST(EnrichmentMatch, NoDetailIsTheCoarseFieldAndTheDetailLengthIsChosenLeavingPositionsOut)
+{
+    const SmallBuild b;
+    const auto& t = levels();
+    const EnrichmentDatabase db = b.build(b.options);
+    EnrichmentCondition query = db.conditions[1];
+    query.depth_mm = 4.5;
+    const std::vector<double> cu(db.coarse_displacement[1].begin(), db.coarse_displacement[1].end());
+    // Detail length 0 off a stored condition: the fine nodes get the coarse field, interpolated.
+    const auto none = match_enrichment(db, EnrichmentMatching::parameters, EnrichmentBlend(2, 0.0), &query, {});
+    ASSERT_EQ(none.detail, 0.0);
+    EXPECT_NE(test::error_message([&] { blended_weights(db, none); }).find("needs the fine nodes' embedding"), std::string::npos);
+    const auto plain = synthesize_fine_displacement(t.coarse.mesh, cu, t.embedding, t.fine.mesh.nodes, blended_weights(db, none, &t.embedding));
+    double worst = 0.0;
+    for (std::size_t j = 0; j < t.fine.mesh.node_count(); ++j) {
+        const auto u = interpolate_nodal(t.coarse.mesh, t.embedding[j], cu, 3);
+        for (int c = 0; c < 3; ++c) worst = std::max(worst, std::abs(plain[3 * j + static_cast<std::size_t>(c)] - u[static_cast<std::size_t>(c)]));
+    }
+    EXPECT_LT(worst, 1e-5); // mm: float32 weights
+    // A share between 0 and 1: the subset synthesis still gives the whole synthesis's bits.
+    const auto half = match_enrichment(db, EnrichmentMatching::parameters, EnrichmentBlend(2, 2.0), &query, {});
+    EXPECT_GT(half.detail, 0.0);
+    EXPECT_LT(half.detail, 1.0);
+    const auto whole = synthesize_fine_displacement(t.coarse.mesh, cu, t.embedding, t.fine.mesh.nodes, blended_weights(db, half, &t.embedding));
+    std::vector<std::int32_t> subset;
+    for (std::size_t j = 0; j < t.fine.mesh.node_count(); j += 5) subset.push_back(static_cast<std::int32_t>(j));
+    std::vector<double> part(whole.size(), 0.0);
+    synthesize_fine_subset(t.coarse.mesh, cu, t.embedding, t.fine.mesh.nodes, db, half, subset, part);
+    for (const auto j : subset)
+        for (std::size_t c = 0; c < 3; ++c) ASSERT_EQ(part[3 * static_cast<std::size_t>(j) + c], whole[3 * static_cast<std::size_t>(j) + c]);
+    // Leave one position out (B from B2 and back): one error per candidate length, the smallest wins.
+    std::vector<std::pair<double, double>> errors;
+    const double length = choose_detail_length(db, t.coarse.mesh, t.embedding, t.fine.mesh.nodes, EnrichmentMatching::parameters, 1, &errors);
+    ASSERT_EQ(errors.size(), 9u);
+    EXPECT_TRUE(std::isinf(errors.back().first));
+    double best = errors.front().second;
+    for (const auto& [l, e] : errors) {
+        EXPECT_GT(e, 0.0) << l;
+        best = std::min(best, e);
+    }
+    for (const auto& [l, e] : errors)
+        if (e == best) {
+            EXPECT_EQ(l, length);
+        }
+    std::printf("detail length %.0f mm; leave-one-position-out error: no detail %.4f mm, all detail %.4f mm\n", length, errors.front().second,
+                errors.back().second);
+    // One position only: nothing to leave out, paper 000's behaviour.
+    SmallBuild one = b;
+    one.plan.positions.resize(1);
+    EXPECT_TRUE(std::isinf(choose_detail_length(one.build(one.options), t.coarse.mesh, t.embedding, t.fine.mesh.nodes, EnrichmentMatching::field, 1)));
+}
+
+TEST(LiverModel, TransferDisplacementCarriesALinearFieldExactly)
+{
+    const auto& t = levels();
+    // A linear field on the coarse nodes arrives exactly at the fine nodes inside the coarse mesh.
+    const Eigen::Matrix3d a = (Eigen::Matrix3d() << 0.01, -0.02, 0.003, 0.0, 0.015, -0.01, 0.02, 0.004, -0.005).finished();
+    const Vec3 shift(0.3, -0.2, 0.1);
+    std::vector<double> coarse_u(3 * t.coarse.mesh.node_count());
+    for (std::size_t n = 0; n < t.coarse.mesh.node_count(); ++n) {
+        const Vec3 u = a * t.coarse.mesh.nodes[n] + shift;
+        for (int c = 0; c < 3; ++c) coarse_u[3 * n + static_cast<std::size_t>(c)] = u[c];
+    }
+    const auto fine_u = transfer_displacement(t.coarse, coarse_u, t.fine);
+    ASSERT_EQ(fine_u.size(), 3 * t.fine.mesh.node_count());
+    std::size_t inside = 0;
+    for (std::size_t n = 0; n < t.fine.mesh.node_count(); ++n) {
+        if (!t.embedding[n].inside) continue;
+        ++inside;
+        const Vec3 expected = a * t.fine.mesh.nodes[n] + shift;
+        for (int c = 0; c < 3; ++c) ASSERT_NEAR(fine_u[3 * n + static_cast<std::size_t>(c)], expected[c], 1e-9) << "node " << n;
+    }
+    EXPECT_GT(inside, t.fine.mesh.node_count() / 2);
+    EXPECT_NE(test::error_message([&] { transfer_displacement(t.coarse, {1.0, 2.0}, t.fine); }).find("2 values for"), std::string::npos);
 }
 
 } // namespace

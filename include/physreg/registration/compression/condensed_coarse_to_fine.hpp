@@ -22,11 +22,11 @@ class CondensedCoarseToFine {
 public:
     /// `coarse` and `fine_nodes` as coarsen_liver_model made them for `fine`; `db` built for both
     /// (the caller checks with check_database_fits); `fine_query`: the fine nodes each update
-    /// returns. Throws Error for a fine node out of range or a blend size < 1, and as
+    /// returns. Throws Error for a fine node out of range or a bad blend, and as
     /// CondensedContactModel does.
     CondensedCoarseToFine(const LiverModel& fine, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
                           const EnrichmentDatabase& db, const std::vector<Indenter>& session_tools, std::vector<std::int32_t> fine_query,
-                          EnrichmentMatching how, int blend, const CondensedContactOptions& options = {});
+                          EnrichmentMatching how, const EnrichmentBlend& blend, const CondensedContactOptions& options = {});
 
     struct Update {
         CondensedContactModel::Update contact; ///< its contact_ms (step 1) and recovery_ms (step 2)
@@ -49,7 +49,7 @@ private:
     const EnrichmentDatabase& m_db;
     std::vector<std::int32_t> m_fine_query;
     EnrichmentMatching m_how;
-    int m_blend;
+    EnrichmentBlend m_blend;
     CondensedContactModel m_coarse;
     std::vector<double> m_fine_u;
 };

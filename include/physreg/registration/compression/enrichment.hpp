@@ -20,6 +20,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -126,22 +127,52 @@ enum class EnrichmentMatching {
 };
 EnrichmentMatching parse_enrichment_matching(const std::string& text);
 
+/// How matched conditions make the fine detail. The `conditions` nearest are blended by inverse
+/// distance. The stored detail's share falls with the nearest match's distance d as
+/// 1 / (1 + (d / detail_length_mm)²); the rest is the coarse field interpolated trilinearly (no
+/// detail), so that detail made under a tool far from this one cannot hurt more than it may help.
+/// detail_length_mm = ∞: the stored detail whatever the distance (paper 000); 0: only on an exact hit.
+struct EnrichmentBlend {
+    int conditions = 1;
+    double detail_length_mm = std::numeric_limits<double>::infinity();
+    EnrichmentBlend(int k = 1, double length_mm = std::numeric_limits<double>::infinity()) : conditions(k), detail_length_mm(length_mm) {}
+    /// Throws Error naming `what` for fewer than 1 condition or a length < 0 or NaN.
+    void validate(const std::string& what) const;
+    double detail_share(double nearest_distance) const;
+};
+
 struct EnrichmentMatch {
     std::vector<std::size_t> conditions; ///< the k nearest, nearest first
     std::vector<double> distances;       ///< parameters: mm (|Δ contact| + |Δ depth| + 10 mm/rad × angle); field: RMS mm
     std::vector<double> blend;           ///< inverse-distance weights, Σ = 1
+    double detail = 1.0;                 ///< share of the stored detail (EnrichmentBlend); the rest: trilinear coarse field
     bool outside_range = false;          ///< the query lies beyond the database's conditions: extrapolated
     std::string range_note;              ///< how far outside, for the warning
+    double nearest_position_mm = 0.0;    ///< parameters: entry point to the nearest stored one
 };
 
 /// Parameter distance between conditions, mm (10 mm per radian of direction change).
 double condition_distance(const EnrichmentCondition& a, const EnrichmentCondition& b);
-/// The k nearest conditions. `query` is needed for parameter matching (and checks the range);
-/// `coarse_u` (3 per coarse node) for field matching.
-EnrichmentMatch match_enrichment(const EnrichmentDatabase& db, EnrichmentMatching how, int k, const EnrichmentCondition* query,
+/// The nearest conditions. `query` is needed for parameter matching (and checks the range);
+/// `coarse_u` (3 per coarse node) for field matching. The range: a query is inside when its entry
+/// point lies within the stored entry points' convex hull (seen along the pressing direction)
+/// grown by 5 mm, its depth within the stored depths there, and its direction within 5° (or the
+/// stored tilt) of a stored one; anything else is extrapolated and says how far out it lies.
+EnrichmentMatch match_enrichment(const EnrichmentDatabase& db, EnrichmentMatching how, const EnrichmentBlend& blend, const EnrichmentCondition* query,
                                  const std::vector<double>& coarse_u);
-/// Σ_m blend_m Φ_m over the matched conditions (partition of unity kept).
-std::vector<float> blended_weights(const EnrichmentDatabase& db, const EnrichmentMatch& match);
+/// Σ_m blend_m Φ_m over the matched conditions, mixed with the trilinear weights of `fine_nodes`
+/// by the match's detail share (partition of unity kept). `fine_nodes` may be null when the
+/// detail share is 1.
+std::vector<float> blended_weights(const EnrichmentDatabase& db, const EnrichmentMatch& match,
+                                   const std::vector<NodeEmbedding>* fine_nodes = nullptr);
+/// The detail length (EnrichmentBlend) with the lowest leave-one-sequence-out error: each stored
+/// condition predicted from the conditions of the other positions and orientations (matched as
+/// `how`, `k` blended), its own fine nodes as the truth; among 0, 1, 2, 4, …, 64 mm and ∞.
+/// Returns ∞ (paper 000) for a database of one sequence. `errors_mm`: (length, mean fine-node
+/// error) per candidate.
+double choose_detail_length(const EnrichmentDatabase& db, const VolumeMesh& coarse, const std::vector<NodeEmbedding>& fine_nodes,
+                            const std::vector<Vec3>& fine_rest, EnrichmentMatching how, int k,
+                            std::vector<std::pair<double, double>>* errors_mm = nullptr);
 /// The blend size with the lowest leave-one-out error over the database (each stored condition
 /// predicted from the others by field matching, its own fine nodes as the truth), among 1…max_k.
 /// Returns k and the error per k (mean fine-node error, mm) in `errors_mm`.
@@ -165,7 +196,8 @@ struct CoarseToFinePrediction {
 };
 CoarseToFinePrediction predict_coarse_to_fine(const LiverModel& fine, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
                                               const EnrichmentDatabase& db, const Indenter& tool, const LandmarkSet& rest_landmarks,
-                                              EnrichmentMatching how, int k, const PredictionOptions& options, const std::string& what);
+                                              EnrichmentMatching how, const EnrichmentBlend& blend, const PredictionOptions& options,
+                                              const std::string& what);
 
 /// A compression followed as `steps` tool positions from first contact to the final depth, each
 /// update warm-started from the previous one, with the high-resolution model and coarse-to-fine
@@ -183,7 +215,7 @@ struct TrackingRun {
 };
 TrackingRun track_compression(const LiverModel& fine, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
                               const EnrichmentDatabase& db, const Indenter& tool, const LandmarkSet& rest_landmarks, int steps,
-                              EnrichmentMatching how, int k, const PredictionOptions& options, const std::string& what,
+                              EnrichmentMatching how, const EnrichmentBlend& blend, const PredictionOptions& options, const std::string& what,
                               const std::function<void(int)>& on_step = {}, bool high_resolution = true);
 
 /// Atomic write (temporary name, then rename).
