@@ -53,7 +53,7 @@ void add_subcommand_bench(CLI::App& app)
     auto* group = app.add_subcommand("bench", "Benchmarks of the registration pipeline (JSON)");
     group->require_subcommand(1);
     struct Options : CommonOptions {
-        std::string dataset, parameters, database, states = "A,B,C,D,E", held_out = "D,E", output, match = "parameters", blend = "auto", detail = "auto";
+        std::string dataset, parameters, database, states = "A,B,C,D,E", held_out = "D,E", output, match = "parameters", blend = "auto", detail = "inf";
         ModelOptions model;
         int steps = 20;
     };
@@ -70,7 +70,7 @@ void add_subcommand_bench(CLI::App& app)
     sub->add_option("--steps", o->steps, "Tool positions from first contact to the final depth (default 20)");
     sub->add_option("--match", o->match, "parameters or field");
     sub->add_option("--blend", o->blend, "auto or a number of blended conditions");
-    sub->add_option("--detail-length", o->detail, "Share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²), the rest the coarse field: auto (leave-one-position-out best, default), inf (paper 000: all detail) or L in mm");
+    sub->add_option("--detail-length", o->detail, "Share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²), the rest the coarse field: inf (paper 000: all detail at any distance; default), L in mm, or auto (the leave-one-position-out best around the rest landmarks; measured unreliable, docs/enrichment.md)");
     sub->add_option("-o,--output", o->output, "JSON report (also printed with --json)");
     sub->add_flag("--json", o->json, "Print the report on stdout");
     sub->callback([o] {
@@ -83,7 +83,7 @@ void add_subcommand_bench(CLI::App& app)
         const LiverModel coarse = coarsen_liver_model(loaded.model, db.coarse_grid(), &embedding);
         check_database_fits(db, loaded.model, coarse, "--database '" + o->database + "'");
         const int k = blend_size(o->blend, db, coarse, embedding, loaded.model);
-        const double detail = detail_length(o->detail, db, coarse, embedding, loaded.model, how, k);
+        const double detail = detail_length(o->detail, db, coarse, embedding, loaded.model, how, k, loaded.rest_landmarks);
         const auto cases = compression_cases(loaded.dataset, split_names(o->states, "--states"));
         const PredictionOptions options = prediction_options(o->model);
         json report;
@@ -167,7 +167,7 @@ void add_subcommand_bench(CLI::App& app)
     // bench condensed (issue 30).
     struct CondensedOptions : CommonOptions {
         std::string dataset, parameters, states = "A,B,C,D,E", held_out = "D,E", output, nonlinear = "never", database, match = "parameters",
-                    blend = "auto", detail = "auto";
+                    blend = "auto", detail = "inf";
         ModelOptions model;
         int steps = 20;
         double margin_mm = 10.0;
@@ -191,7 +191,7 @@ void add_subcommand_bench(CLI::App& app)
                      "condensed, the database matched, the landmarks' fine nodes synthesised — timed per stage");
     cond->add_option("--match", co->match, "With --database: parameters (default) or field");
     cond->add_option("--blend", co->blend, "With --database: auto or a number of blended conditions");
-    cond->add_option("--detail-length", co->detail, "With --database: share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²): auto (default), inf (paper 000) or L in mm");
+    cond->add_option("--detail-length", co->detail, "With --database: share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²): inf (paper 000; default), L in mm, or auto (leave-one-position-out; measured unreliable, docs/enrichment.md)");
     cond->add_option("--candidate-margin", co->margin_mm, "Candidates: surface nodes within the tool's reach + this of a path, mm (default 10)");
     cond->add_option("-o,--output", co->output, "JSON report (also printed with --json)");
     cond->add_flag("--json", co->json, "Print the report on stdout");
@@ -227,7 +227,7 @@ void add_subcommand_bench(CLI::App& app)
             coarse = coarsen_liver_model(loaded.model, db->coarse_grid(), &embedding);
             check_database_fits(*db, loaded.model, *coarse, "--database '" + co->database + "'");
             blend = blend_size(co->blend, *db, *coarse, embedding, loaded.model);
-            detail = detail_length(co->detail, *db, *coarse, embedding, loaded.model, how, blend);
+            detail = detail_length(co->detail, *db, *coarse, embedding, loaded.model, how, blend, loaded.rest_landmarks);
             logger()->info("bench condensed: the coarse model ({} nodes) condensed for coarse-to-fine", coarse->mesh.node_count());
             c2f.emplace(loaded.model, *coarse, embedding, *db, tools, query, how, EnrichmentBlend(blend, detail), options);
         }

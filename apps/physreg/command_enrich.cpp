@@ -230,7 +230,7 @@ void add_subcommand_enrich(CLI::App& app)
     });
 
     struct ApplyOptions : CommonOptions {
-        std::string database, dataset, state, parameters, output, match = "parameters", blend = "auto", detail = "auto";
+        std::string database, dataset, state, parameters, output, match = "parameters", blend = "auto", detail = "inf";
         ModelOptions model;
         double field_spacing = 1.0;
         bool replace = false;
@@ -245,7 +245,7 @@ void add_subcommand_enrich(CLI::App& app)
     add_model_options(apply, a->model);
     apply->add_option("--match", a->match, "parameters (tool position, direction, depth; paper 000) or field (coarse displacement similarity)");
     apply->add_option("--blend", a->blend, "Conditions blended: auto (leave-one-out best of 1…4) or a number");
-    apply->add_option("--detail-length", a->detail, "Share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²), the rest the coarse field: auto (leave-one-position-out best, default), inf (paper 000: all detail) or L in mm");
+    apply->add_option("--detail-length", a->detail, "Share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²), the rest the coarse field: inf (paper 000: all detail at any distance; default), L in mm, or auto (the leave-one-position-out best around the rest landmarks; measured unreliable, docs/enrichment.md)");
     apply->add_option("--field-spacing", a->field_spacing, "Voxel size of the displacement field, mm (default 1)");
     apply->add_option("-o,--output", a->output, "Output directory (created)")->required();
     apply->add_flag("--force", a->replace, "Replace an existing output directory (only once the new one is complete)");
@@ -262,7 +262,7 @@ void add_subcommand_enrich(CLI::App& app)
         std::vector<double> loo;
         const int k = blend_size(a->blend, db, coarse, embedding, loaded.model, &loo);
         std::vector<std::pair<double, double>> detail_loo;
-        const double detail = detail_length(a->detail, db, coarse, embedding, loaded.model, how, k, &detail_loo);
+        const double detail = detail_length(a->detail, db, coarse, embedding, loaded.model, how, k, loaded.rest_landmarks, &detail_loo);
         StagedDirectory staging(a->output, a->replace);
         const auto prediction = predict_coarse_to_fine(loaded.model, coarse, embedding, db, cases[0].tool, loaded.rest_landmarks, how,
                                                        EnrichmentBlend(k, detail), prediction_options(a->model), "compression " + a->state);

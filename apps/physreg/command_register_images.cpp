@@ -44,7 +44,7 @@ struct Options : CommonOptions {
     std::string initial = "rigid";
     double cell_size = 6.0, facet_distance = 0.75, margin = 15.0, anchor = 0.0, tolerance = 1e-3, bspline_grid = 50.0, demons_sigma = 1.5;
     int iterations = 5, cycles = 40;
-    bool no_moduli = false, replace = false;
+    bool no_moduli = false, replace = false, symmetric = false;
     unsigned seed = 1;
 };
 
@@ -289,6 +289,8 @@ void add_subcommand_register_images_impl(CLI::App& app)
     cmd->add_option("--cycles", o->cycles, "most alternation cycles")->capture_default_str();
     cmd->add_option("--tolerance", o->tolerance, "stop when a cycle lowers the objective by less than this fraction")->capture_default_str();
     cmd->add_flag("--no-moduli", o->no_moduli, "keep the moduli at their initial values (boundary load only)");
+    cmd->add_flag("--symmetric", o->symmetric, "symmetric objective: also pull the model toward the fixed structures' boundary points "
+                                                "that no model node reaches (fixed → model distances as well as model → fixed)");
     cmd->add_option("--cell-size", o->cell_size, "largest tetrahedron circumradius, mm")->capture_default_str();
     cmd->add_option("--facet-distance", o->facet_distance, "largest distance of a mesh facet to the label interface, mm")->capture_default_str();
     cmd->add_option("--margin", o->margin, "the registration region: the structures' bounding box plus this margin, mm")->capture_default_str();
@@ -396,7 +398,8 @@ void add_subcommand_register_images_impl(CLI::App& app)
             for (auto label : model_labels)
                 if (!meshed.count(label)) fail("register-images: structure {} got no tetrahedron (thinner than --cell-size {} mm?)", label, o->cell_size);
         }
-        const SegmentationObjective objective(mesh, model_labels, map_of, "the fixed segmentation");
+        SegmentationObjective objective(mesh, model_labels, map_of, "the fixed segmentation");
+        if (o->symmetric) objective.add_reverse_term();
         logger()->info("register-images: {} tetrahedra, {} nodes, {} held, {} loaded surface nodes, {} objective terms", mesh.cell_count(), mesh.node_count(),
                        elastic.fixed_nodes.size(), force_nodes.size(), objective.term_count());
 
@@ -573,6 +576,8 @@ void add_subcommand_register_images_impl(CLI::App& app)
         summary["model"] = {{"element", "linear tetrahedra (CGAL Mesh_3, conforming to every structure), small-strain linear elasticity"},
                             {"tetrahedra", mesh.cell_count()}, {"nodes", mesh.node_count()}, {"held_nodes", elastic.fixed_nodes.size()}, {"hold", in.hold},
                             {"held_labels", held_labels}, {"anchor_n_mm", o->anchor}, {"loaded_nodes", force_nodes.size()}, {"objective_terms", objective.term_count()},
+                            {"objective", objective.symmetric() ? "symmetric (model → fixed and fixed → model)" : "model → fixed"},
+                            {"reverse_points", objective.reverse_point_count()},
                             {"meshing_s", mesh_s},
                             {"quality", {{"min_dihedral_deg", quality.min_dihedral_deg}, {"max_dihedral_deg", quality.max_dihedral_deg},
                                          {"min_radius_ratio", quality.min_radius_ratio}, {"mean_edge_mm", quality.mean_edge_mm}, {"below_10_deg", quality.below_10_deg}}}};

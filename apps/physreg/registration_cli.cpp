@@ -6,6 +6,7 @@
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
+#include "physreg/registration/compression/condensed_contact.hpp"
 
 #include <sstream>
 
@@ -131,9 +132,15 @@ int blend_size(const std::string& text, const EnrichmentDatabase& db, const Live
 }
 
 double detail_length(const std::string& text, const EnrichmentDatabase& db, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
-                     const LiverModel& fine, EnrichmentMatching how, int k, std::vector<std::pair<double, double>>* loo_mm)
+                     const LiverModel& fine, EnrichmentMatching how, int k, const LandmarkSet& rest_landmarks,
+                     std::vector<std::pair<double, double>>* loo_mm)
 {
-    if (text == "auto") return choose_detail_length(db, coarse.mesh, fine_nodes, fine.mesh.nodes, how, k, loo_mm);
+    if (text == "auto") {
+        std::vector<Vec3> targets;
+        for (const auto& l : rest_landmarks) targets.push_back(l.position);
+        const auto scored = targets.empty() ? std::vector<std::int32_t>{} : nodes_near(fine.mesh, targets, 2.0 * fine.cell_size_mm.maxCoeff());
+        return choose_detail_length(db, coarse.mesh, fine_nodes, fine.mesh.nodes, how, k, loo_mm, scored);
+    }
     if (text == "inf") return std::numeric_limits<double>::infinity();
     const auto number = parse_number(text);
     if (!number || !(*number >= 0.0)) fail("--detail-length: '{}' is not auto, inf or a length ≥ 0 mm", text);

@@ -40,8 +40,11 @@ int blend_size(const std::string& text, const EnrichmentDatabase& db, const Live
 /// --detail-length: "auto" (leave-one-sequence-out best over the database, choose_detail_length;
 /// errors per length in `loo_mm`), "inf" (paper 000: the stored detail at any distance) or a
 /// number ≥ 0 mm; Error otherwise.
+/// `rest_landmarks`: the targets whose neighbourhood (fine nodes within two cells) the error is
+/// taken over; empty: every fine node.
 double detail_length(const std::string& text, const EnrichmentDatabase& db, const LiverModel& coarse, const std::vector<NodeEmbedding>& fine_nodes,
-                     const LiverModel& fine, EnrichmentMatching how, int k, std::vector<std::pair<double, double>>* loo_mm = nullptr);
+                     const LiverModel& fine, EnrichmentMatching how, int k, const LandmarkSet& rest_landmarks,
+                     std::vector<std::pair<double, double>>* loo_mm = nullptr);
 /// A length for JSON: the number, or "inf".
 nlohmann::json length_json(double length_mm);
 

@@ -213,8 +213,16 @@ int choose_blend_size(const EnrichmentDatabase& db, const VolumeMesh& coarse, co
 }
 
 double choose_detail_length(const EnrichmentDatabase& db, const VolumeMesh& coarse, const std::vector<NodeEmbedding>& fine_nodes,
-                            const std::vector<Vec3>& fine_rest, EnrichmentMatching how, int k, std::vector<std::pair<double, double>>* errors_mm)
+                            const std::vector<Vec3>& fine_rest, EnrichmentMatching how, int k, std::vector<std::pair<double, double>>* errors_mm,
+                            const std::vector<std::int32_t>& scored)
 {
+    std::vector<std::size_t> nodes;
+    for (const auto n : scored) {
+        if (n < 0 || static_cast<std::size_t>(n) >= fine_rest.size()) fail("detail length: scored fine node {} out of range", n);
+        nodes.push_back(static_cast<std::size_t>(n));
+    }
+    if (nodes.empty())
+        for (std::size_t j = 0; j < fine_rest.size(); ++j) nodes.push_back(j);
     const double inf = std::numeric_limits<double>::infinity();
     const std::vector<double> lengths{0.0, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, inf};
     auto same_sequence = [&](std::size_t a, std::size_t b) {
@@ -246,9 +254,9 @@ double choose_detail_length(const EnrichmentDatabase& db, const VolumeMesh& coar
             m.detail = EnrichmentBlend(k, lengths[l]).detail_share(m.distances.front());
             const auto u = synthesize_fine_displacement(coarse, cu, fine_nodes, fine_rest, blended_weights(db, m, &fine_nodes));
             double e = 0.0;
-            for (std::size_t j = 0; j < fine_rest.size(); ++j)
+            for (const std::size_t j : nodes)
                 e += Vec3(u[3 * j] - truth[3 * j], u[3 * j + 1] - truth[3 * j + 1], u[3 * j + 2] - truth[3 * j + 2]).norm();
-            error[l] += e / double(fine_rest.size());
+            error[l] += e / double(nodes.size());
         }
     }
     if (errors_mm) errors_mm->clear();

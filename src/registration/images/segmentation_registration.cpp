@@ -7,6 +7,7 @@
 
 #include <lbfgs.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -74,10 +75,152 @@ SegmentationObjective::SegmentationObjective(const VolumeMesh& mesh, const std::
     if (m_nodes.empty()) fail("{}: no structure boundary to match (no distance map given)", what);
 }
 
+namespace {
+
+using Cell3 = Eigen::Matrix<long, 3, 1>;
+
+// Nearest point of a set by a uniform bucket grid (rebuilt for each evaluation: the deformed nodes
+// move). A few thousand points per structure; written here rather than pulling in a k-d tree.
+class NearestPoint {
+public:
+    NearestPoint(const std::vector<Vec3>& points, double cell) : m_points(points), m_cell(cell)
+    {
+        m_lo = Vec3::Constant(1e300);
+        Vec3 hi = Vec3::Constant(-1e300);
+        for (const auto& p : points) m_lo = m_lo.cwiseMin(p), hi = hi.cwiseMax(p);
+        for (int d = 0; d < 3; ++d) m_dims[d] = std::max<long>(1, static_cast<long>((hi[d] - m_lo[d]) / m_cell) + 1);
+        m_start.assign(static_cast<std::size_t>(m_dims[0] * m_dims[1] * m_dims[2]) + 1, 0);
+        for (const auto& p : points) ++m_start[bucket(index(p)) + 1];
+        for (std::size_t b = 1; b < m_start.size(); ++b) m_start[b] += m_start[b - 1];
+        m_order.resize(points.size());
+        std::vector<std::size_t> fill(m_start.begin(), m_start.end() - 1);
+        for (std::size_t i = 0; i < points.size(); ++i) m_order[fill[bucket(index(points[i]))]++] = static_cast<std::int32_t>(i);
+    }
+    /// Index (into the points) of the nearest to q.
+    std::size_t nearest(const Vec3& q) const
+    {
+        const Cell3 c = index(q);
+        double best = 1e300;
+        std::size_t which = 0;
+        for (long r = 0;; ++r) {
+            for (long i = c[0] - r; i <= c[0] + r; ++i)
+                for (long j = c[1] - r; j <= c[1] + r; ++j)
+                    for (long k = c[2] - r; k <= c[2] + r; ++k) {
+                        if (std::max({std::abs(i - c[0]), std::abs(j - c[1]), std::abs(k - c[2])}) != r) continue; // the ring only
+                        if (i < 0 || j < 0 || k < 0 || i >= m_dims[0] || j >= m_dims[1] || k >= m_dims[2]) continue;
+                        const std::size_t b = bucket({i, j, k});
+                        for (std::size_t t = m_start[b]; t < m_start[b + 1]; ++t) {
+                            const auto p = static_cast<std::size_t>(m_order[t]);
+                            const double d = (m_points[p] - q).squaredNorm();
+                            if (d < best || (d == best && p < which)) best = d, which = p;
+                        }
+                    }
+            // Every point beyond ring r lies farther than r cells from q's cell.
+            const bool outside_all = c[0] - r <= 0 && c[1] - r <= 0 && c[2] - r <= 0 && c[0] + r >= m_dims[0] - 1 && c[1] + r >= m_dims[1] - 1 &&
+                                     c[2] + r >= m_dims[2] - 1;
+            if ((best < 1e300 && static_cast<double>(r) * m_cell >= std::sqrt(best)) || outside_all) return which;
+        }
+    }
+
+private:
+    Cell3 index(const Vec3& p) const
+    {
+        Cell3 i;
+        for (int d = 0; d < 3; ++d) i[d] = static_cast<long>(std::floor((p[d] - m_lo[d]) / m_cell));
+        return i;
+    }
+    std::size_t bucket(const Cell3& i) const
+    {
+        Cell3 c;
+        for (int d = 0; d < 3; ++d) c[d] = std::clamp<long>(i[d], 0, m_dims[d] - 1);
+        return static_cast<std::size_t>((c[2] * m_dims[1] + c[1]) * m_dims[0] + c[0]);
+    }
+    const std::vector<Vec3>& m_points;
+    double m_cell;
+    Vec3 m_lo;
+    long m_dims[3] = {1, 1, 1};
+    std::vector<std::size_t> m_start;
+    std::vector<std::int32_t> m_order;
+};
+
+} // namespace
+
+void SegmentationObjective::add_reverse_term()
+{
+    m_targets.assign(m_maps.size(), {});
+    for (std::size_t s = 0; s < m_maps.size(); ++s) {
+        if (!m_maps[s]) continue;
+        auto& target = m_targets[s];
+        for (std::size_t t = 0; t < m_nodes.size(); ++t)
+            if (m_structures[t] == static_cast<int>(s)) target.nodes.push_back(m_nodes[t]);
+        if (target.nodes.empty()) continue;
+        // The voxels on either side of the zero level (|φ| ≤ half a voxel: the boundary voxels'
+        // centres), projected onto it along ∇φ.
+        const SignedDistanceMap& map = *m_maps[s];
+        const ImageGeometry& g = map.geometry();
+        const double half = 0.5 * g.spacing.maxCoeff() * 1.01;
+        std::vector<Vec3> points;
+        for (std::int64_t k = 0; k < g.size[2]; ++k)
+            for (std::int64_t j = 0; j < g.size[1]; ++j)
+                for (std::int64_t i = 0; i < g.size[0]; ++i) {
+                    const float v = map.values()[static_cast<std::size_t>((k * g.size[1] + j) * g.size[0] + i)];
+                    if (std::abs(v) > half) continue;
+                    const Vec3 p = g.index_to_physical(Vec3(double(i), double(j), double(k)));
+                    Vec3 gradient;
+                    const double phi = map.value_and_gradient(p, gradient);
+                    const double norm2 = gradient.squaredNorm();
+                    if (!(norm2 > 1e-12)) continue;
+                    points.push_back(p - phi * gradient / norm2);
+                }
+        // At most 4 points per model term: the fine voxel surface adds cost, not information.
+        const std::size_t cap = 4 * target.nodes.size();
+        const std::size_t stride = std::max<std::size_t>(1, (points.size() + cap - 1) / cap);
+        for (std::size_t q = 0; q < points.size(); q += stride) target.points.push_back(points[q]);
+        if (target.points.empty()) fail("symmetric objective: structure {} has no boundary voxel in its distance map", s);
+        target.weight = double(target.nodes.size()) / double(target.points.size());
+    }
+}
+
+std::size_t SegmentationObjective::reverse_point_count() const
+{
+    std::size_t n = 0;
+    for (const auto& t : m_targets) n += t.points.size();
+    return n;
+}
+
+double SegmentationObjective::reverse_term(const Eigen::VectorXd& u, Eigen::VectorXd* gradient) const
+{
+    double sum = 0.0;
+    for (const auto& target : m_targets) {
+        if (target.nodes.empty()) continue;
+        std::vector<Vec3> x(target.nodes.size());
+        for (std::size_t i = 0; i < x.size(); ++i) {
+            const auto n = static_cast<Eigen::Index>(target.nodes[i]);
+            x[i] = m_mesh.nodes[static_cast<std::size_t>(n)] + Vec3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
+        }
+        // Bucket size: the mean spacing of the boundary nodes over their box, about one per cell.
+        Vec3 lo = x.front(), hi = x.front();
+        for (const auto& p : x) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
+        const Vec3 extent = (hi - lo).cwiseMax(1e-3);
+        const double cell = std::max(1e-3, std::cbrt(extent.prod() / double(x.size())));
+        const NearestPoint nearest(x, cell);
+        for (const auto& y : target.points) {
+            const std::size_t i = nearest.nearest(y);
+            const Vec3 r = x[i] - y;
+            sum += 0.5 * target.weight * r.squaredNorm();
+            if (gradient) {
+                const auto n = static_cast<Eigen::Index>(target.nodes[i]);
+                for (int c = 0; c < 3; ++c) (*gradient)[3 * n + c] += target.weight * r[c];
+            }
+        }
+    }
+    return sum;
+}
+
 double SegmentationObjective::evaluate(const Eigen::VectorXd& u, Eigen::VectorXd* gradient) const
 {
     if (gradient) gradient->setZero(u.size());
-    double phi_sum = 0.0;
+    double phi_sum = m_targets.empty() ? 0.0 : reverse_term(u, gradient);
     for (std::size_t t = 0; t < m_nodes.size(); ++t) {
         const auto n = static_cast<std::size_t>(m_nodes[t]);
         const Vec3 x = m_mesh.nodes[n] + Vec3(u[static_cast<Eigen::Index>(3 * n)], u[static_cast<Eigen::Index>(3 * n + 1)], u[static_cast<Eigen::Index>(3 * n + 2)]);
@@ -92,7 +235,16 @@ double SegmentationObjective::evaluate(const Eigen::VectorXd& u, Eigen::VectorXd
 
 double SegmentationObjective::rms_distance_mm(const Eigen::VectorXd& u) const
 {
-    return std::sqrt(2.0 * evaluate(u, nullptr) / static_cast<double>(m_nodes.size()));
+    // The forward direction only (the model's boundary nodes to the fixed segmentation): the same
+    // measure with or without the reverse term.
+    double sum = 0.0;
+    for (std::size_t t = 0; t < m_nodes.size(); ++t) {
+        const auto n = static_cast<std::size_t>(m_nodes[t]);
+        const Vec3 x = m_mesh.nodes[n] + Vec3(u[static_cast<Eigen::Index>(3 * n)], u[static_cast<Eigen::Index>(3 * n + 1)], u[static_cast<Eigen::Index>(3 * n + 2)]);
+        const double phi = m_maps[static_cast<std::size_t>(m_structures[t])]->value(x);
+        sum += phi * phi;
+    }
+    return std::sqrt(sum / static_cast<double>(m_nodes.size()));
 }
 
 std::vector<std::pair<double, double>> SegmentationObjective::per_structure_distance_mm(const Eigen::VectorXd& u) const

@@ -168,11 +168,12 @@ std::vector<float> blended_weights(const EnrichmentDatabase& db, const Enrichmen
 /// The detail length (EnrichmentBlend) with the lowest leave-one-sequence-out error: each stored
 /// condition predicted from the conditions of the other positions and orientations (matched as
 /// `how`, `k` blended), its own fine nodes as the truth; among 0, 1, 2, 4, …, 64 mm and ∞.
-/// Returns ∞ (paper 000) for a database of one sequence. `errors_mm`: (length, mean fine-node
-/// error) per candidate.
+/// The error is the mean over `scored` fine nodes (e.g. those around the targets the user looks
+/// at: the rest landmarks), or over every fine node when `scored` is empty. Returns ∞ (paper 000)
+/// for a database of one sequence. `errors_mm`: (length, mean error) per candidate.
 double choose_detail_length(const EnrichmentDatabase& db, const VolumeMesh& coarse, const std::vector<NodeEmbedding>& fine_nodes,
                             const std::vector<Vec3>& fine_rest, EnrichmentMatching how, int k,
-                            std::vector<std::pair<double, double>>* errors_mm = nullptr);
+                            std::vector<std::pair<double, double>>* errors_mm = nullptr, const std::vector<std::int32_t>& scored = {});
 /// The blend size with the lowest leave-one-out error over the database (each stored condition
 /// predicted from the others by field matching, its own fine nodes as the truth), among 1…max_k.
 /// Returns k and the error per k (mean fine-node error, mm) in `errors_mm`.

@@ -53,11 +53,28 @@ public:
     /// −φ ∇φ/|∇φ| at the rest position, averaged over a node's terms (zero for nodes without one).
     std::vector<Vec3> distance_vectors() const;
 
+    /// Makes Φ symmetric (issue 28): adds the reverse direction, from the fixed segmentation's
+    /// boundary to the model. Points y on each structure's zero level (the voxels beside it
+    /// projected onto it) are pulled by the nearest deformed boundary node of the same structure:
+    /// Ψ = ½ Σ_s w_s Σ_y |x_n(y) − y|², w_s = (the structure's terms / its points) so that both
+    /// directions weigh the same. It sees what the forward term cannot: parts of the fixed structure
+    /// that no model node reaches.
+    void add_reverse_term();
+    bool symmetric() const { return !m_targets.empty(); }
+    std::size_t reverse_point_count() const;
+
 private:
+    double reverse_term(const Eigen::VectorXd& u, Eigen::VectorXd* gradient) const;
     const VolumeMesh& m_mesh;
     std::vector<std::int32_t> m_nodes;
     std::vector<int> m_structures;
     std::vector<const SignedDistanceMap*> m_maps;
+    struct ReverseTargets {
+        std::vector<Vec3> points;           ///< on the structure's zero level, mm
+        std::vector<std::int32_t> nodes;    ///< the structure's boundary nodes
+        double weight = 1.0;
+    };
+    std::vector<ReverseTargets> m_targets; ///< per structure with a map (empty: forward only)
 };
 
 /// Nodes on faces of the meshed domain's outer boundary (a face of exactly one cell).
