@@ -45,6 +45,42 @@ std::vector<std::int32_t> boundary_nodes_of(const VolumeMesh& mesh, const std::f
     return nodes;
 }
 
+/// Outward unit normals (area-weighted over the faces around each node) of the boundary of the
+/// cells accepted by `in_set`, at rest; zero for nodes off that boundary. `mean_edge_mm`: the
+/// boundary faces' mean edge length.
+std::vector<Vec3> boundary_normals_of(const VolumeMesh& mesh, const std::function<bool(std::size_t)>& in_set, double& mean_edge_mm)
+{
+    std::map<FaceKey, std::pair<int, std::array<std::int32_t, 4>>> faces; // count; the face's corners and the cell's other node
+    for (std::size_t c = 0; c < mesh.cell_count(); ++c) {
+        if (!in_set(c)) continue;
+        const auto cell = mesh.cell(c);
+        for (int f = 0; f < 4; ++f) {
+            const auto a = cell[static_cast<std::size_t>(tet_faces[f][0])], b = cell[static_cast<std::size_t>(tet_faces[f][1])],
+                       d = cell[static_cast<std::size_t>(tet_faces[f][2])];
+            auto& entry = faces[face_key(a, b, d)];
+            ++entry.first;
+            entry.second = {a, b, d, cell[static_cast<std::size_t>(f)]};
+        }
+    }
+    std::vector<Vec3> normal(mesh.node_count(), Vec3::Zero());
+    double edges = 0.0;
+    std::size_t count = 0;
+    for (const auto& [key, entry] : faces) {
+        if (entry.first != 1) continue;
+        const auto& [a, b, d, other] = entry.second;
+        const Vec3 &pa = mesh.nodes[static_cast<std::size_t>(a)], &pb = mesh.nodes[static_cast<std::size_t>(b)], &pd = mesh.nodes[static_cast<std::size_t>(d)];
+        edges += (pb - pa).norm() + (pd - pb).norm() + (pa - pd).norm();
+        count += 3;
+        Vec3 n = (pb - pa).cross(pd - pa); // |n| = twice the area
+        if (n.dot(mesh.nodes[static_cast<std::size_t>(other)] - pa) > 0) n = -n; // away from the cell
+        for (const auto v : {a, b, d}) normal[static_cast<std::size_t>(v)] += n;
+    }
+    for (auto& n : normal)
+        if (n.norm() > 0) n.normalize();
+    mean_edge_mm = count ? edges / double(count) : 0.0;
+    return normal;
+}
+
 double seconds_since(std::chrono::steady_clock::time_point t0)
 {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -60,7 +96,7 @@ std::vector<std::int32_t> outer_boundary_nodes(const VolumeMesh& mesh)
 
 SegmentationObjective::SegmentationObjective(const VolumeMesh& mesh, const std::vector<std::int32_t>& structure_labels,
                                              std::vector<const SignedDistanceMap*> maps, const std::string& what)
-    : m_mesh(mesh), m_maps(std::move(maps))
+    : m_mesh(mesh), m_labels(structure_labels), m_maps(std::move(maps))
 {
     if (m_maps.size() != structure_labels.size()) fail("{}: {} distance maps for {} structures", what, m_maps.size(), structure_labels.size());
     if (mesh.cell_type != CellType::tetrahedron) fail("{}: the mesh is not tetrahedral", what);
@@ -96,13 +132,14 @@ public:
         std::vector<std::size_t> fill(m_start.begin(), m_start.end() - 1);
         for (std::size_t i = 0; i < points.size(); ++i) m_order[fill[bucket(index(points[i]))]++] = static_cast<std::int32_t>(i);
     }
-    /// Index (into the points) of the nearest to q.
-    std::size_t nearest(const Vec3& q) const
+    /// Index (into the points) of the nearest to q within `reach` mm, or points.size() for none.
+    std::size_t nearest(const Vec3& q, double reach) const
     {
         const Cell3 c = index(q);
-        double best = 1e300;
-        std::size_t which = 0;
-        for (long r = 0;; ++r) {
+        double best = reach * reach;
+        std::size_t which = m_points.size();
+        const long rings = static_cast<long>(std::ceil(reach / m_cell)) + 1;
+        for (long r = 0; r <= rings; ++r) {
             for (long i = c[0] - r; i <= c[0] + r; ++i)
                 for (long j = c[1] - r; j <= c[1] + r; ++j)
                     for (long k = c[2] - r; k <= c[2] + r; ++k) {
@@ -118,8 +155,9 @@ public:
             // Every point beyond ring r lies farther than r cells from q's cell.
             const bool outside_all = c[0] - r <= 0 && c[1] - r <= 0 && c[2] - r <= 0 && c[0] + r >= m_dims[0] - 1 && c[1] + r >= m_dims[1] - 1 &&
                                      c[2] + r >= m_dims[2] - 1;
-            if ((best < 1e300 && static_cast<double>(r) * m_cell >= std::sqrt(best)) || outside_all) return which;
+            if (static_cast<double>(r) * m_cell >= std::sqrt(best) || outside_all) return which;
         }
+        return which;
     }
 
 private:
@@ -154,6 +192,9 @@ void SegmentationObjective::add_reverse_term()
         for (std::size_t t = 0; t < m_nodes.size(); ++t)
             if (m_structures[t] == static_cast<int>(s)) target.nodes.push_back(m_nodes[t]);
         if (target.nodes.empty()) continue;
+        const auto label = m_labels[s];
+        const auto normals = boundary_normals_of(m_mesh, [&](std::size_t c) { return m_mesh.cell_labels[c] == label; }, target.spacing_mm);
+        for (const auto n : target.nodes) target.normals.push_back(normals[static_cast<std::size_t>(n)]);
         // The voxels on either side of the zero level (|φ| ≤ half a voxel: the boundary voxels'
         // centres), projected onto it along ∇φ.
         const SignedDistanceMap& map = *m_maps[s];
@@ -198,19 +239,22 @@ double SegmentationObjective::reverse_term(const Eigen::VectorXd& u, Eigen::Vect
             const auto n = static_cast<Eigen::Index>(target.nodes[i]);
             x[i] = m_mesh.nodes[static_cast<std::size_t>(n)] + Vec3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
         }
-        // Bucket size: the mean spacing of the boundary nodes over their box, about one per cell.
-        Vec3 lo = x.front(), hi = x.front();
-        for (const auto& p : x) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
-        const Vec3 extent = (hi - lo).cwiseMax(1e-3);
-        const double cell = std::max(1e-3, std::cbrt(extent.prod() / double(x.size())));
+        // Buckets of the boundary's node spacing (its mean edge at rest).
+        const double cell = std::max(1e-3, target.spacing_mm);
         const NearestPoint nearest(x, cell);
+        // Fixed boundary farther than a few node spacings from the whole model is what the model
+        // cannot represent (a vessel branch thinner than its cells): left out, as ICP trims.
+        const double reach = 3.0 * cell;
         for (const auto& y : target.points) {
-            const std::size_t i = nearest.nearest(y);
-            const Vec3 r = x[i] - y;
-            sum += 0.5 * target.weight * r.squaredNorm();
+            // Point to plane (the node's rest normal): the pull is across the model's surface; along
+            // it the nodes stay free (a point-to-node pull drags them sideways, measured worse).
+            const std::size_t i = nearest.nearest(y, reach);
+            if (i == x.size()) continue;
+            const double r = (x[i] - y).dot(target.normals[i]);
+            sum += 0.5 * target.weight * r * r;
             if (gradient) {
                 const auto n = static_cast<Eigen::Index>(target.nodes[i]);
-                for (int c = 0; c < 3; ++c) (*gradient)[3 * n + c] += target.weight * r[c];
+                for (int c = 0; c < 3; ++c) (*gradient)[3 * n + c] += target.weight * r * target.normals[i][c];
             }
         }
     }

@@ -55,10 +55,12 @@ public:
 
     /// Makes Φ symmetric (issue 28): adds the reverse direction, from the fixed segmentation's
     /// boundary to the model. Points y on each structure's zero level (the voxels beside it
-    /// projected onto it) are pulled by the nearest deformed boundary node of the same structure:
-    /// Ψ = ½ Σ_s w_s Σ_y |x_n(y) − y|², w_s = (the structure's terms / its points) so that both
-    /// directions weigh the same. It sees what the forward term cannot: parts of the fixed structure
-    /// that no model node reaches.
+    /// projected onto it) pull the nearest deformed boundary node n(y) of the same structure across
+    /// its surface, point to plane along its rest normal ν: Ψ = ½ Σ_s w_s Σ_y ((x_n(y) − y)·ν_n)²,
+    /// w_s = (the structure's terms / its points) so that both directions weigh the same. It sees
+    /// what the forward term cannot: parts of the fixed structure that no model node reaches.
+    /// Points farther than 3 boundary edges from every node are left out (what the model cannot
+    /// represent, e.g. a vessel branch thinner than its cells).
     void add_reverse_term();
     bool symmetric() const { return !m_targets.empty(); }
     std::size_t reverse_point_count() const;
@@ -66,13 +68,16 @@ public:
 private:
     double reverse_term(const Eigen::VectorXd& u, Eigen::VectorXd* gradient) const;
     const VolumeMesh& m_mesh;
+    std::vector<std::int32_t> m_labels;
     std::vector<std::int32_t> m_nodes;
     std::vector<int> m_structures;
     std::vector<const SignedDistanceMap*> m_maps;
     struct ReverseTargets {
         std::vector<Vec3> points;           ///< on the structure's zero level, mm
         std::vector<std::int32_t> nodes;    ///< the structure's boundary nodes
+        std::vector<Vec3> normals;          ///< their outward unit normals at rest
         double weight = 1.0;
+        double spacing_mm = 1.0;            ///< mean boundary edge at rest
     };
     std::vector<ReverseTargets> m_targets; ///< per structure with a map (empty: forward only)
 };
