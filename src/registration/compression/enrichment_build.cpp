@@ -4,6 +4,7 @@
 #include "physreg/registration/compression/enrichment.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/core/progress_note.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/core/thread_governor.hpp"
 
@@ -174,6 +175,9 @@ EnrichmentDatabase build_sequence(const LiverModel& fine, const LiverModel& coar
         return solver;
     };
     auto fine_solver = solver_for(fine), coarse_solver = solver_for(coarse);
+    // A sequence takes minutes on the body model and reports as a whole: its depths post notes
+    // that the progress display shows between those reports (the ground truth's load steps do the same).
+    const std::string note = fmt::format("enrichment sequence {}", conditions.front().position);
     double previous_depth = -back;
     for (std::size_t i = 0; i < conditions.size(); ++i) {
         const double travel = conditions[i].depth_mm - previous_depth;
@@ -183,9 +187,11 @@ EnrichmentDatabase build_sequence(const LiverModel& fine, const LiverModel& coar
                                              std::lround(std::ceil(1.875 * travel / (options.tool_speed_per_cell * m.cell_size_mm.minCoeff()))));
             const std::string what = fmt::format("enrichment condition {} {:.2f} mm, {} model", conditions[i].position, conditions[i].depth_mm, level);
             StaticSolveResult s;
+            post_progress_note(note, fmt::format("depth {:.1f} mm ({} of {}), {} model", conditions[i].depth_mm, i + 1, conditions.size(), level));
             try {
                 s = solver.solve(double(i + 1) / steps, ramp);
             } catch (const Error& e) {
+                post_progress_note(note, "");
                 fail("{}: {} (drop this depth or position from the plan, or lower --tool-speed)", what, e.what());
             }
             if (!s.converged) fail("{}: {}", what, s.message);
@@ -197,6 +203,7 @@ EnrichmentDatabase build_sequence(const LiverModel& fine, const LiverModel& coar
         part.coarse_displacement.emplace_back(cu.begin(), cu.end());
         part.weights.push_back(enrichment_weights(coarse.mesh, cu, fine_nodes, fine.mesh.nodes, fu));
     }
+    post_progress_note(note, "");
     return part;
 }
 
