@@ -21,11 +21,14 @@ parser.add_argument("work")
 parser.add_argument("out")
 parser.add_argument("--physreg", default=os.path.join(ROOT, "build", "bin", "physreg"))
 parser.add_argument("--variant", action="append", default=None, help="NAME=extra register-images options, e.g. symmetric=--symmetric")
+parser.add_argument("--cases", default="", help="comma-separated case names (default: every case of WORK)")
 args = parser.parse_args()
 variants = dict(v.split("=", 1) for v in (args.variant or ["forward=", "symmetric=--symmetric"]))
 
 rows = []
 for case in sorted(os.listdir(args.work)):
+    if args.cases and case not in args.cases.split(","):
+        continue
     folder = os.path.join(args.work, case)
     study = os.path.join(folder, "register", "summary.json")
     if not os.path.isfile(study):

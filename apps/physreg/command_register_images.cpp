@@ -45,6 +45,9 @@ struct Options : CommonOptions {
     double cell_size = 6.0, facet_distance = 0.75, margin = 15.0, anchor = 0.0, tolerance = 1e-3, bspline_grid = 50.0, demons_sigma = 1.5;
     int iterations = 5, cycles = 40;
     bool no_moduli = false, replace = false, symmetric = false;
+    double moduli_prior = 0.0, moduli_prior_rms = 0.1;
+    bool rest_offsets = true;
+    std::string law = "linear";
     unsigned seed = 1;
 };
 
@@ -289,6 +292,15 @@ void add_subcommand_register_images_impl(CLI::App& app)
     cmd->add_option("--cycles", o->cycles, "most alternation cycles")->capture_default_str();
     cmd->add_option("--tolerance", o->tolerance, "stop when a cycle lowers the objective by less than this fraction")->capture_default_str();
     cmd->add_flag("--no-moduli", o->no_moduli, "keep the moduli at their initial values (boundary load only)");
+    cmd->add_option("--moduli-prior", o->moduli_prior, "log-normal prior on the estimated moduli around the tissue table's: the factor one standard "
+                                                       "deviation away (e.g. 2), 0 for free ratios")->capture_default_str();
+    cmd->add_option("--moduli-prior-rms", o->moduli_prior_rms, "the prior's weight: one standard deviation costs as much as this rms boundary "
+                                                               "distance over every objective term, mm")->capture_default_str();
+    cmd->add_option("--law", o->law, "the registering model's law: linear (small strain, paper 002) or corotational (large rotations: the "
+                                     "element rotations refreshed every cycle)")->capture_default_str();
+    cmd->add_flag("--rest-offsets,!--no-rest-offsets", o->rest_offsets, "each model boundary node keeps its rest distance to the moving segmentation's "
+                                                      "boundary (the mesh is not the voxel boundary) instead of landing exactly on the fixed one (default; "
+                                                      "--no-rest-offsets: paper 002's objective)")->capture_default_str();
     cmd->add_flag("--symmetric", o->symmetric, "symmetric objective: also pull the model toward the fixed structures' boundary points "
                                                 "that no model node reaches (fixed → model distances as well as model → fixed)");
     cmd->add_option("--cell-size", o->cell_size, "largest tetrahedron circumradius, mm")->capture_default_str();
@@ -317,7 +329,16 @@ void add_subcommand_register_images_impl(CLI::App& app)
         reg.max_cycles = o->cycles;
         reg.relative_tolerance = o->tolerance;
         reg.estimate_moduli = !o->no_moduli;
-        reg.validate();
+        reg.moduli_prior_factor = o->moduli_prior;
+        reg.moduli_prior_rms_mm = o->moduli_prior_rms;
+        if (o->law != "linear" && o->law != "corotational") fail("--law '{}': use linear or corotational", o->law);
+        reg.corotational = o->law == "corotational";
+        if (o->no_moduli && o->moduli_prior != 0.0) fail("--moduli-prior {} needs estimated moduli (--no-moduli is given)", o->moduli_prior);
+        try {
+            reg.validate();
+        } catch (const Error& e) {
+            fail("--moduli-prior {} / --moduli-prior-rms {} mm: {}", o->moduli_prior, o->moduli_prior_rms, e.what());
+        }
         check_output_path(o->output, "--output");
         StagedDirectory staging(o->output, o->replace);
         ProgressDisplay bar("register-images");
@@ -400,6 +421,19 @@ void add_subcommand_register_images_impl(CLI::App& app)
         }
         SegmentationObjective objective(mesh, model_labels, map_of, "the fixed segmentation");
         if (o->symmetric) objective.add_reverse_term();
+        std::vector<std::unique_ptr<SignedDistanceMap>> moving_maps;
+        if (o->rest_offsets) {
+            std::vector<const SignedDistanceMap*> moving_of;
+            for (std::size_t j = 0; j < model_labels.size(); ++j) {
+                moving_maps.push_back(map_of[j] ? std::make_unique<SignedDistanceMap>(in.moving_labels, std::set<std::int32_t>{model_labels[j]},
+                                                                                      "moving label " + std::to_string(model_labels[j]))
+                                                : nullptr);
+                moving_of.push_back(moving_maps.back().get());
+            }
+            objective.set_rest_offsets(moving_of);
+            const auto [mean, most] = objective.rest_offset_stats_mm();
+            logger()->info("register-images: rest offsets of the boundary nodes to the moving segmentation: mean {:.3f} mm, max {:.3f} mm", mean, most);
+        }
         logger()->info("register-images: {} tetrahedra, {} nodes, {} held, {} loaded surface nodes, {} objective terms", mesh.cell_count(), mesh.node_count(),
                        elastic.fixed_nodes.size(), force_nodes.size(), objective.term_count());
 
@@ -409,6 +443,9 @@ void add_subcommand_register_images_impl(CLI::App& app)
         const SegmentationRegistrationResult b = register_segmentation(mesh, elastic, objective, force_nodes, initial_e, reg, [&](double f, const std::string& m) {
             bar.update(0.05 + 0.45 * f, m);
         });
+        if (b.inverted_elements > 0)
+            logger()->warn("register-images: {} of {} tetrahedra are inverted in the biomechanical result (summary.json: model.inverted_elements); "
+                           "the dense field is still written", b.inverted_elements, mesh.cell_count());
         const std::vector<double> u(b.displacement_mm.data(), b.displacement_mm.data() + b.displacement_mm.size());
         {
             const auto t0 = std::chrono::steady_clock::now();
@@ -426,9 +463,9 @@ void add_subcommand_register_images_impl(CLI::App& app)
             for (const auto& h : b.history) {
                 json e;
                 for (std::size_t j = 0; j < model_labels.size(); ++j) e[std::to_string(model_labels[j])] = h.young_moduli_pa[j];
-                history.push_back({{"cycle", h.cycle}, {"objective_mm2", h.objective_mm2}, {"rms_distance_mm", h.rms_distance_mm}, {"evaluations", h.evaluations}, {"young_moduli_pa", e}});
+                history.push_back({{"cycle", h.cycle}, {"objective_mm2", h.objective_mm2}, {"prior_mm2", h.prior_mm2}, {"rms_distance_mm", h.rms_distance_mm}, {"evaluations", h.evaluations}, {"young_moduli_pa", e}});
             }
-            m.details = {{"initial_rms_distance_mm", b.initial_rms_mm}, {"rms_distance_mm", b.rms_distance_mm}, {"evaluations", b.evaluations},
+            m.details = {{"initial_rms_distance_mm", b.initial_rms_mm}, {"rms_distance_mm", b.rms_distance_mm}, {"moduli_prior_mm2", b.prior_mm2}, {"evaluations", b.evaluations},
                          {"factorisations", b.factorisations}, {"cycles", static_cast<int>(b.history.size()) - 1}, {"stop_reason", b.stop_reason},
                          {"time_split_s", {{"factorisation", b.factorisation_s}, {"solves", b.solve_s}, {"field", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()}}},
                          {"history", history}};
@@ -554,6 +591,15 @@ void add_subcommand_register_images_impl(CLI::App& app)
                                   {"young_modulus_pa", b.young_moduli_pa[j]}, {"estimated", static_cast<bool>(b.estimated[j])},
                                   {"poisson_ratio", t ? t->poisson_ratio : 0.0}, {"matched", map_of[j] != nullptr},
                                   {"note", b.estimated[j] ? "estimated relative to its piece's reference structure" : "held: the largest structure of its mesh piece, or estimation off"}});
+            for (const auto& m : b.sensitivity)
+                if (m.structure == j)
+                    structures.back()["sensitivity"] = {
+                        {"boundary_change_mm", {{"modulus_doubled", m.boundary_change_doubled_mm}, {"modulus_halved", m.boundary_change_halved_mm}}},
+                        {"objective_change_mm2", {{"modulus_doubled", m.objective_change_doubled_mm2}, {"modulus_halved", m.objective_change_halved_mm2}}},
+                        {"voxel_mm", m.voxel_mm}, {"determined_by_the_data", m.determined},
+                        {"reading", m.determined ? "doubling or halving this modulus moves the structure's boundary by at least a tenth of a voxel (rms)"
+                                                 : "not determined by the data: doubling or halving this modulus moves the structure's boundary by less than a "
+                                                   "tenth of a voxel (rms), below what the segmentations resolve; the estimate is not a measurement"}};
         }
         parameters["structures"] = structures;
         double total_force = 0.0, max_force = 0.0;
@@ -573,19 +619,27 @@ void add_subcommand_register_images_impl(CLI::App& app)
         summary["method"] = o->method;
         summary["structures"] = in.structures;
         summary["region"] = to_json(roi);
-        summary["model"] = {{"element", "linear tetrahedra (CGAL Mesh_3, conforming to every structure), small-strain linear elasticity"},
+        summary["model"] = {{"element", reg.corotational ? "linear tetrahedra (CGAL Mesh_3, conforming to every structure), co-rotational linear elasticity "
+                                                           "(rotations refreshed every cycle)"
+                                                         : "linear tetrahedra (CGAL Mesh_3, conforming to every structure), small-strain linear elasticity"},
+                            {"law", o->law}, {"largest_element_rotation_deg", b.largest_rotation_deg}, {"inverted_elements", b.inverted_elements},
                             {"tetrahedra", mesh.cell_count()}, {"nodes", mesh.node_count()}, {"held_nodes", elastic.fixed_nodes.size()}, {"hold", in.hold},
                             {"held_labels", held_labels}, {"anchor_n_mm", o->anchor}, {"loaded_nodes", force_nodes.size()}, {"objective_terms", objective.term_count()},
                             {"objective", objective.symmetric() ? "symmetric (model → fixed and fixed → model)" : "model → fixed"},
                             {"reverse_points", objective.reverse_point_count()},
+                            {"rest_offsets_mm", objective.has_rest_offsets() ? json{{"mean", objective.rest_offset_stats_mm().first}, {"max", objective.rest_offset_stats_mm().second}} : json(nullptr)},
                             {"meshing_s", mesh_s},
                             {"quality", {{"min_dihedral_deg", quality.min_dihedral_deg}, {"max_dihedral_deg", quality.max_dihedral_deg},
                                          {"min_radius_ratio", quality.min_radius_ratio}, {"mean_edge_mm", quality.mean_edge_mm}, {"below_10_deg", quality.below_10_deg}}}};
         summary["parameters"] = {{"cell_size_mm", o->cell_size}, {"facet_distance_mm", o->facet_distance}, {"margin_mm", o->margin}, {"parametrisation", to_string(reg.parametrisation)},
                                  {"iterations_per_phase", o->iterations}, {"max_cycles", o->cycles}, {"tolerance", o->tolerance}, {"estimate_moduli", !o->no_moduli},
+                                 {"moduli_prior", o->moduli_prior == 0.0 ? json(nullptr) : json{{"factor", o->moduli_prior}, {"rms_mm", o->moduli_prior_rms},
+                                                                                               {"form", "½ N r² Σ (ln(E/E_table) / ln factor)² over the estimated structures"}}},
                                  {"bspline_grid_mm", o->bspline_grid}, {"demons_sigma_voxels", o->demons_sigma}};
         summary["estimated_moduli_pa"] = json::object();
         for (std::size_t j = 0; j < model_labels.size(); ++j) summary["estimated_moduli_pa"][std::to_string(model_labels[j])] = b.young_moduli_pa[j];
+        summary["moduli_determined_by_the_data"] = json::object(); // per estimated structure (parameters.json: the sensitivity behind it)
+        for (const auto& m : b.sensitivity) summary["moduli_determined_by_the_data"][std::to_string(model_labels[m.structure])] = m.determined;
         summary["initial_alignment"] = {{"mode", o->initial}, {"start", alignment.start}, {"rotation_deg", alignment.rotation_deg},
                                         {"translation_mm", {alignment.translation[0], alignment.translation[1], alignment.translation[2]}},
                                         {"rotation_matrix", {{alignment.rotation(0, 0), alignment.rotation(0, 1), alignment.rotation(0, 2)},

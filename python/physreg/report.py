@@ -398,6 +398,32 @@ def convergence_section(summary):
     return f"<h2>Convergence</h2>{figs}" if figs else ""
 
 
+def moduli_section(summary, folder):
+    """register-images: each structure's Young's modulus, and whether the data determine it."""
+    path = Path(folder) / "parameters.json"
+    if summary.get("command") != "register-images" or not path.exists():
+        return ""
+    try:
+        structures = json.loads(path.read_text(encoding="utf-8")).get("structures", [])
+    except json.JSONDecodeError as e:
+        raise ReportError(f"{path}: not valid JSON ({e})")
+    rows = ""
+    for s in structures:
+        sens = s.get("sensitivity")
+        if sens:
+            change = max(sens["boundary_change_mm"]["modulus_doubled"], sens["boundary_change_mm"]["modulus_halved"])
+            verdict = (f"yes: ×2 or ×½ moves its boundary {change:.3f} mm rms (voxel {sens['voxel_mm']:.2f} mm)" if sens["determined_by_the_data"]
+                       else f"<b>no</b>: ×2 or ×½ moves its boundary only {change:.3f} mm rms (voxel {sens['voxel_mm']:.2f} mm) — not a measurement")
+        else:
+            verdict = "held (reference of its piece, or estimation off)"
+        rows += (f"<tr><td>{esc(s.get('label'))}</td><td>{esc(s.get('name', ''))}</td><td class='num'>{s['initial_young_modulus_pa']:.4g}</td>"
+                 f"<td class='num'>{s['young_modulus_pa']:.4g}</td><td>{verdict}</td></tr>")
+    if not rows:
+        return ""
+    return ("<h2>Young's moduli</h2><table><tr><th>label</th><th>tissue</th><th>initial (Pa)</th><th>final (Pa)</th>"
+            "<th>determined by the segmentations?</th></tr>" + rows + "</table>")
+
+
 def displacement_section(folder):
     path = folder / "displacement.nii.gz"
     if not path.exists():
@@ -565,6 +591,7 @@ def build_report(folder, shown_as=None):
         slices_section(summary, folder),
         displacement_section(folder),
         convergence_section(summary),
+        moduli_section(summary, folder),
         timing_section(summary),
     ]
     units = summary.get("units")

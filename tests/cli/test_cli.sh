@@ -373,7 +373,8 @@ expect_no_file "$work/ri_quiet/report.html"
 expect_file "$work/ri_quiet/summary.json"
 grep -q '%' "$work/err.txt" && failed "--quiet still printed progress" || pass
 grep -q '\[info\]' "$work/err.txt" && failed "--quiet still printed info logs" || pass
-for key in '"biomechanical"' '"bspline_labels"' '"demons_labels"' '"rigid_labels"' '"dice"' '"internal"' '"estimated_moduli_pa"'; do
+[ -z "$html" ] || grep -q "<h2>Young's moduli</h2>" "$work/ri/report.html" && pass || failed "register-images report.html says whether the data determine each modulus"
+for key in '"biomechanical"' '"bspline_labels"' '"demons_labels"' '"rigid_labels"' '"dice"' '"internal"' '"estimated_moduli_pa"' '"moduli_determined_by_the_data"' '"rest_offsets_mm"'; do
   grep -q "$key" "$work/ri/summary.json" && pass || failed "register-images summary lacks $key"
 done
 # Each TRE group's median is over the landmarks its count counts; an empty group has none (null).
@@ -443,6 +444,9 @@ expect_no_file "$work/ri_bad5"
 expect_error "register-images: empty structure" "structure 9 is empty in both" \
   "$physreg" $ri --dataset "$ph" --structures 2,9 -o "$work/ri_bad6"
 expect_error "register-images: unknown method" "--method 'affine'" "$physreg" $ri --dataset "$ph" --method affine -o "$work/ri_bad7"
+expect_error "register-images: a moduli prior factor below 1" "--moduli-prior 0.5" "$physreg" $ri --dataset "$ph" --moduli-prior 0.5 -o "$work/ri_bad8"
+expect_no_file "$work/ri_bad8"
+grep -q "must be > 1" "$work/err.txt" && pass || failed "register-images: --moduli-prior 0.5 names the reason"
 
 # A baseline that fails (issue 28 item 2: the fixed frame moved 284 mm, so the images overlap by a
 # sliver and ITK's B-spline finds no fixed sample inside the moving image) is reported as failed in

@@ -3,6 +3,7 @@
 #include "physreg/mechanics/implicit/linear_elasticity.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/mechanics/materials/material.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -101,6 +102,8 @@ LinearElasticModel::LinearElasticModel(const VolumeMesh& mesh, const LinearElast
         const double nu = it == options.poisson_ratio.end() ? options.default_poisson_ratio : it->second;
         Vec3 x[4];
         for (int a = 0; a < 4; ++a) x[a] = mesh.nodes[static_cast<std::size_t>(m_cells[4 * c + static_cast<std::size_t>(a)])];
+        for (int a = 0; a < 4; ++a)
+            for (int i = 0; i < 3; ++i) m_rest_positions.push_back(x[a][i]);
         const double v = tetrahedron_unit_stiffness(x, nu, &m_unit_stiffness[144 * c]);
         if (!(v > 0.0)) fail("{}: tetrahedron {} is degenerate or inverted (volume {} mm³)", what, c, v);
         m_volume[static_cast<std::size_t>(s)] += v;
@@ -194,6 +197,100 @@ void LinearElasticModel::set_young_moduli(const std::vector<double>& young_modul
     ++m_factorisations;
     if (stats.shift > 0.0) fail("linear elasticity: K is not positive definite (a diagonal shift of {} was needed)", stats.shift);
     m_factorisation_s += seconds_since(t0);
+}
+
+void LinearElasticModel::set_element_rotations(const Eigen::VectorXd& u)
+{
+    if (!u.allFinite()) fail("linear elasticity: the displacement the rotations are taken from is not finite");
+    if (static_cast<std::size_t>(u.size()) != 3 * m_node_count) fail("linear elasticity: rotation displacement of size {} for {} nodes", u.size(), m_node_count);
+    if (m_rest_unit_stiffness.empty()) m_rest_unit_stiffness = m_unit_stiffness;
+    const std::size_t cells = m_cell_structure.size();
+    m_unit_rotation_load.assign(12 * cells, 0.0);
+    double largest = 0.0;
+    std::size_t inverted = 0;
+    for (std::size_t c = 0; c < cells; ++c) {
+        const double* rest = &m_rest_positions[12 * c];
+        Eigen::Matrix3d dx, dr;
+        for (int a = 1; a < 4; ++a)
+            for (int i = 0; i < 3; ++i) {
+                const auto n0 = static_cast<Eigen::Index>(3 * m_cells[4 * c]), na = static_cast<Eigen::Index>(3 * m_cells[4 * c + static_cast<std::size_t>(a)]);
+                dr(i, a - 1) = rest[3 * a + i] - rest[i];
+                dx(i, a - 1) = dr(i, a - 1) + u[na + i] - u[n0 + i];
+            }
+        const Eigen::Matrix<double, 3, 3, Eigen::RowMajor> f = dx * dr.inverse();
+        Eigen::Matrix<double, 3, 3, Eigen::RowMajor> r;
+        // An element inverted at u gets the rotation of Irving et al. (corotation()), which pushes it back out.
+        if (!(corotation(f.data(), r.data()) > 0.0)) ++inverted;
+        largest = std::max(largest, std::acos(std::clamp(0.5 * (r.trace() - 1.0), -1.0, 1.0)));
+        // K_R = Rb K Rbᵀ (Rb = diag(R, R, R, R)), block by block; b̂ = Rb K (X − Rbᵀ X). Plain
+        // loops over 3×3 blocks (Eigen's 12×12 products trip GCC 12's AVX-512 header warnings).
+        const double* k = &m_rest_unit_stiffness[144 * c];
+        double* rotated = &m_unit_stiffness[144 * c];
+        double y[12], z[12];
+        for (int a = 0; a < 4; ++a)
+            for (int i = 0; i < 3; ++i) {
+                double rt_x = 0.0; // (Rᵀ X_a)_i
+                for (int m = 0; m < 3; ++m) rt_x += r(m, i) * rest[3 * a + m];
+                y[3 * a + i] = rest[3 * a + i] - rt_x;
+            }
+        for (int p = 0; p < 12; ++p) {
+            z[p] = 0.0;
+            for (int q = 0; q < 12; ++q) z[p] += k[12 * p + q] * y[q];
+        }
+        for (int a = 0; a < 4; ++a)
+            for (int i = 0; i < 3; ++i) {
+                double v = 0.0;
+                for (int m = 0; m < 3; ++m) v += r(i, m) * z[3 * a + m];
+                m_unit_rotation_load[12 * c + static_cast<std::size_t>(3 * a + i)] = v;
+            }
+        for (int a = 0; a < 4; ++a)
+            for (int b = 0; b < 4; ++b) {
+                Eigen::Matrix3d block;
+                for (int i = 0; i < 3; ++i)
+                    for (int m = 0; m < 3; ++m) block(i, m) = k[(3 * a + i) * 12 + 3 * b + m];
+                const Eigen::Matrix3d turned = r * block * r.transpose();
+                for (int i = 0; i < 3; ++i)
+                    for (int m = 0; m < 3; ++m) rotated[(3 * a + i) * 12 + 3 * b + m] = turned(i, m);
+            }
+    }
+    m_largest_rotation_deg = largest * 180.0 / 3.14159265358979323846;
+    m_inverted_at_rotations = inverted;
+    if (!m_young_pa.empty()) set_young_moduli(m_young_pa);
+}
+
+std::size_t LinearElasticModel::inverted_elements(const Eigen::VectorXd& u) const
+{
+    std::size_t count = 0;
+    for (std::size_t c = 0; c < m_cell_structure.size(); ++c) {
+        Vec3 x[4];
+        for (int a = 0; a < 4; ++a) {
+            const auto n = static_cast<Eigen::Index>(3 * m_cells[4 * c + static_cast<std::size_t>(a)]);
+            for (int i = 0; i < 3; ++i) x[a][i] = m_rest_positions[12 * c + static_cast<std::size_t>(3 * a + i)] + u[n + i];
+        }
+        if (!((x[1] - x[0]).cross(x[2] - x[0]).dot(x[3] - x[0]) > 0.0)) ++count;
+    }
+    return count;
+}
+
+void LinearElasticModel::rotation_load(Eigen::VectorXd& b) const
+{
+    b.setZero(static_cast<Eigen::Index>(3 * m_node_count));
+    if (m_unit_rotation_load.empty()) return;
+    for (std::size_t c = 0; c < m_cell_structure.size(); ++c) {
+        const double e_mpa = 1e-6 * m_young_pa.at(static_cast<std::size_t>(m_cell_structure[c]));
+        for (int q = 0; q < 12; ++q) b[3 * m_cells[4 * c + static_cast<std::size_t>(q / 3)] + q % 3] += e_mpa * m_unit_rotation_load[12 * c + static_cast<std::size_t>(q)];
+    }
+}
+
+double LinearElasticModel::structure_rotation_load(std::size_t j, const Eigen::VectorXd& a) const
+{
+    if (m_unit_rotation_load.empty()) return 0.0;
+    double sum = 0.0;
+    for (std::size_t c = 0; c < m_cell_structure.size(); ++c) {
+        if (static_cast<std::size_t>(m_cell_structure[c]) != j) continue;
+        for (int q = 0; q < 12; ++q) sum += a[3 * m_cells[4 * c + static_cast<std::size_t>(q / 3)] + q % 3] * m_unit_rotation_load[12 * c + static_cast<std::size_t>(q)];
+    }
+    return sum;
 }
 
 void LinearElasticModel::solve(const Eigen::VectorXd& f, Eigen::VectorXd& u) const

@@ -269,7 +269,7 @@ double SegmentationObjective::evaluate(const Eigen::VectorXd& u, Eigen::VectorXd
         const auto n = static_cast<std::size_t>(m_nodes[t]);
         const Vec3 x = m_mesh.nodes[n] + Vec3(u[static_cast<Eigen::Index>(3 * n)], u[static_cast<Eigen::Index>(3 * n + 1)], u[static_cast<Eigen::Index>(3 * n + 2)]);
         Vec3 g;
-        const double phi = m_maps[static_cast<std::size_t>(m_structures[t])]->value_and_gradient(x, g);
+        const double phi = m_maps[static_cast<std::size_t>(m_structures[t])]->value_and_gradient(x, g) - offset(t);
         phi_sum += 0.5 * phi * phi;
         if (gradient)
             for (int c = 0; c < 3; ++c) (*gradient)[static_cast<Eigen::Index>(3 * n + static_cast<std::size_t>(c))] += phi * g[c];
@@ -285,7 +285,7 @@ double SegmentationObjective::rms_distance_mm(const Eigen::VectorXd& u) const
     for (std::size_t t = 0; t < m_nodes.size(); ++t) {
         const auto n = static_cast<std::size_t>(m_nodes[t]);
         const Vec3 x = m_mesh.nodes[n] + Vec3(u[static_cast<Eigen::Index>(3 * n)], u[static_cast<Eigen::Index>(3 * n + 1)], u[static_cast<Eigen::Index>(3 * n + 2)]);
-        const double phi = m_maps[static_cast<std::size_t>(m_structures[t])]->value(x);
+        const double phi = m_maps[static_cast<std::size_t>(m_structures[t])]->value(x) - offset(t);
         sum += phi * phi;
     }
     return std::sqrt(sum / static_cast<double>(m_nodes.size()));
@@ -309,6 +309,40 @@ std::vector<std::pair<double, double>> SegmentationObjective::per_structure_dist
     return out;
 }
 
+std::vector<std::int32_t> SegmentationObjective::structure_term_nodes(std::size_t j) const
+{
+    std::vector<std::int32_t> nodes;
+    for (std::size_t t = 0; t < m_nodes.size(); ++t)
+        if (static_cast<std::size_t>(m_structures[t]) == j) nodes.push_back(m_nodes[t]);
+    return nodes;
+}
+
+double SegmentationObjective::structure_voxel_mm(std::size_t j) const
+{
+    return j < m_maps.size() && m_maps[j] ? m_maps[j]->geometry().spacing.minCoeff() : 0.0;
+}
+
+void SegmentationObjective::set_rest_offsets(const std::vector<const SignedDistanceMap*>& moving_maps)
+{
+    if (moving_maps.size() != m_maps.size()) fail("rest offsets: {} moving distance maps for {} structures", moving_maps.size(), m_maps.size());
+    std::vector<double> offsets(m_nodes.size(), 0.0);
+    for (std::size_t t = 0; t < m_nodes.size(); ++t) {
+        const auto* map = moving_maps[static_cast<std::size_t>(m_structures[t])];
+        if (!map) continue;
+        const double o = map->value(m_mesh.nodes[static_cast<std::size_t>(m_nodes[t])]);
+        if (!std::isfinite(o)) fail("rest offsets: structure {}'s moving distance map is not finite at node {}", m_labels[static_cast<std::size_t>(m_structures[t])], m_nodes[t]);
+        offsets[t] = o;
+    }
+    m_offsets = std::move(offsets);
+}
+
+std::pair<double, double> SegmentationObjective::rest_offset_stats_mm() const
+{
+    double sum = 0.0, most = 0.0;
+    for (double o : m_offsets) sum += std::abs(o), most = std::max(most, std::abs(o));
+    return {m_offsets.empty() ? 0.0 : sum / static_cast<double>(m_offsets.size()), most};
+}
+
 std::vector<Vec3> SegmentationObjective::distance_vectors() const
 {
     std::vector<Vec3> sum(m_mesh.node_count(), Vec3::Zero());
@@ -316,7 +350,7 @@ std::vector<Vec3> SegmentationObjective::distance_vectors() const
     for (std::size_t t = 0; t < m_nodes.size(); ++t) {
         const auto n = static_cast<std::size_t>(m_nodes[t]);
         Vec3 g;
-        const double phi = m_maps[static_cast<std::size_t>(m_structures[t])]->value_and_gradient(m_mesh.nodes[n], g);
+        const double phi = m_maps[static_cast<std::size_t>(m_structures[t])]->value_and_gradient(m_mesh.nodes[n], g) - offset(t);
         const double norm = g.norm();
         if (norm > 1e-9) sum[n] -= phi * g / norm;
         ++count[n];
@@ -331,6 +365,10 @@ void SegmentationRegistrationOptions::validate() const
     if (alternation_iterations < 1) fail("segmentation registration: alternation iterations {} must be ≥ 1", alternation_iterations);
     if (max_cycles < 1) fail("segmentation registration: max cycles {} must be ≥ 1", max_cycles);
     if (!(relative_tolerance >= 0.0) || !std::isfinite(relative_tolerance)) fail("segmentation registration: relative tolerance {} must be ≥ 0", relative_tolerance);
+    if (!(moduli_prior_factor == 0.0 || (moduli_prior_factor > 1.0 && std::isfinite(moduli_prior_factor))))
+        fail("segmentation registration: moduli prior factor {} must be > 1 (one standard deviation of the log-normal prior), or 0 for none", moduli_prior_factor);
+    if (!(moduli_prior_rms_mm > 0.0) || !std::isfinite(moduli_prior_rms_mm))
+        fail("segmentation registration: moduli prior weight {} mm (the rms distance one standard deviation costs) must be positive", moduli_prior_rms_mm);
 }
 
 BoundaryParametrisation parse_boundary_parametrisation(const std::string& text)
@@ -356,10 +394,12 @@ SegmentationGradient evaluate_segmentation_gradient(const LinearElasticModel& mo
         for (int c = 0; c < 3; ++c)
             boundary[3 * force_nodes[i] + c] = (forces ? force_scale_n_mm : 1.0) * x[static_cast<Eigen::Index>(3 * i) + c];
     SegmentationGradient out;
+    Eigen::VectorXd load; // the co-rotational law's load at frozen rotations (zero for the linear law)
+    model.rotation_load(load);
     if (forces)
-        model.solve(boundary, out.displacement_mm);
+        model.solve(boundary + load, out.displacement_mm);
     else
-        model.solve_prescribed(Eigen::VectorXd::Zero(dofs), boundary, out.displacement_mm);
+        model.solve_prescribed(load, boundary, out.displacement_mm);
     Eigen::VectorXd g_u;
     out.objective_mm2 = objective.evaluate(out.displacement_mm, &g_u);
     model.solve(g_u, out.lambda); // zero at fixed dofs
@@ -378,7 +418,7 @@ SegmentationGradient evaluate_segmentation_gradient(const LinearElasticModel& mo
     }
     out.d_log_modulus.resize(model.structure_count());
     for (std::size_t j = 0; j < model.structure_count(); ++j)
-        out.d_log_modulus[j] = -1e-6 * model.young_moduli_pa()[j] * model.structure_form(j, out.lambda, out.displacement_mm);
+        out.d_log_modulus[j] = -1e-6 * model.young_moduli_pa()[j] * (model.structure_form(j, out.lambda, out.displacement_mm) - model.structure_rotation_load(j, out.lambda));
     return out;
 }
 
@@ -395,7 +435,23 @@ struct PhaseContext {
     std::vector<std::size_t> estimated; ///< structures of the modulus phase
     int evaluations = 0;
     bool modulus_phase = false;
+    double prior_weight = 0.0;          ///< N r² / (ln f)², mm² (0: no prior)
+    std::vector<double> prior_log_moduli; ///< ln E⁰ per structure
 };
+
+/// Π = ½ w Σ_(j estimated) (ln E_j − ln E_j⁰)²; its gradient in ln E_j when asked.
+double moduli_prior(const PhaseContext& p, const std::vector<double>& e, std::vector<double>* d_log = nullptr)
+{
+    if (d_log) d_log->assign(e.size(), 0.0);
+    if (p.prior_weight == 0.0) return 0.0;
+    double value = 0.0;
+    for (auto j : p.estimated) {
+        const double r = std::log(e[j]) - p.prior_log_moduli[j];
+        value += 0.5 * p.prior_weight * r * r;
+        if (d_log) (*d_log)[j] = p.prior_weight * r;
+    }
+    return value;
+}
 
 lbfgsfloatval_t evaluate_phase(void* instance, const lbfgsfloatval_t* v, lbfgsfloatval_t* g, const int n, const lbfgsfloatval_t)
 {
@@ -414,8 +470,13 @@ lbfgsfloatval_t evaluate_phase(void* instance, const lbfgsfloatval_t* v, lbfgsfl
     }
     p.model->set_young_moduli(e);
     const SegmentationGradient r = evaluate_segmentation_gradient(*p.model, *p.objective, *p.force_nodes, p.parametrisation, p.scale, *p.x);
-    for (int i = 0; i < n; ++i) g[i] = r.d_log_modulus[p.estimated[static_cast<std::size_t>(i)]];
-    return r.objective_mm2;
+    std::vector<double> d_prior;
+    const double prior = moduli_prior(p, e, &d_prior);
+    for (int i = 0; i < n; ++i) {
+        const auto j = p.estimated[static_cast<std::size_t>(i)];
+        g[i] = r.d_log_modulus[j] + d_prior[j];
+    }
+    return r.objective_mm2 + prior;
 }
 
 int run_lbfgs(PhaseContext& context, Eigen::VectorXd& v, int iterations, double& fx)
@@ -486,12 +547,26 @@ SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, con
         x *= best_alpha;
     }
 
-    PhaseContext context{&model, &objective, &force_nodes, mode, scale, &x, model.young_moduli_pa(), estimated, evaluations, false};
+    PhaseContext context{&model, &objective, &force_nodes, mode, scale, &x, model.young_moduli_pa(), estimated, evaluations, false, 0.0, {}};
+    if (options.moduli_prior_factor > 0.0) {
+        const double log_factor = std::log(options.moduli_prior_factor);
+        context.prior_weight = static_cast<double>(objective.term_count()) * options.moduli_prior_rms_mm * options.moduli_prior_rms_mm / (log_factor * log_factor);
+        for (double e : initial_moduli_pa) context.prior_log_moduli.push_back(std::log(e));
+    }
+    const auto rms_of = [&](double data) { return std::sqrt(2.0 * data / static_cast<double>(objective.term_count())); };
     double phi = evaluate(x).objective_mm2;
-    result.history.push_back({0, phi, std::sqrt(2.0 * phi / static_cast<double>(objective.term_count())), model.young_moduli_pa(), ++context.evaluations});
+    double prior = moduli_prior(context, model.young_moduli_pa());
+    result.history.push_back({0, phi, rms_of(phi), prior, model.young_moduli_pa(), ++context.evaluations});
     result.stop_reason = "cycle budget used";
     for (int cycle = 1; cycle <= options.max_cycles; ++cycle) {
-        const double before = phi;
+        if (options.corotational) {
+            // Large deformation: the rotations frozen at the current state for this cycle.
+            model.set_element_rotations(evaluate(x).displacement_mm);
+            phi = evaluate(x).objective_mm2;
+            context.evaluations += 2;
+            result.largest_rotation_deg = std::max(result.largest_rotation_deg, model.largest_rotation_deg());
+        }
+        const double before = phi + prior; // the objective minimised: data term + prior
         context.modulus_phase = false;
         run_lbfgs(context, x, options.alternation_iterations, phi);
         if (!estimated.empty()) {
@@ -504,12 +579,13 @@ SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, con
             model.set_young_moduli(e); // the line search may have left the factor at a trial point
         }
         phi = evaluate(x).objective_mm2;
+        prior = moduli_prior(context, model.young_moduli_pa());
         ++context.evaluations;
-        result.history.push_back({cycle, phi, std::sqrt(2.0 * phi / static_cast<double>(objective.term_count())), model.young_moduli_pa(), context.evaluations});
+        result.history.push_back({cycle, phi, rms_of(phi), prior, model.young_moduli_pa(), context.evaluations});
         if (progress)
             progress(static_cast<double>(cycle) / options.max_cycles,
                      fmt::format("cycle {}: rms distance {:.3f} mm", cycle, result.history.back().rms_distance_mm));
-        if (before - phi < options.relative_tolerance * before) {
+        if (before - (phi + prior) < options.relative_tolerance * before) {
             result.stop_reason = fmt::format("a cycle lowered the objective by less than {} of it", options.relative_tolerance);
             break;
         }
@@ -517,13 +593,42 @@ SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, con
     const SegmentationGradient final_state = evaluate(x);
     result.displacement_mm = final_state.displacement_mm;
     // The boundary load: the nodal forces, or the reactions K u at the prescribed nodes.
-    Eigen::VectorXd k_u;
+    Eigen::VectorXd k_u, rotation_load;
     model.multiply(result.displacement_mm, k_u);
+    model.rotation_load(rotation_load);
+    k_u -= rotation_load; // the co-rotational element forces R K (Rᵀ x − X)
     result.force_n = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(3 * mesh.node_count()));
     for (auto n : force_nodes)
         for (int c = 0; c < 3; ++c) result.force_n[3 * n + c] = k_u[3 * n + c];
     result.young_moduli_pa = model.young_moduli_pa();
     result.objective_mm2 = final_state.objective_mm2;
+    result.inverted_elements = model.inverted_elements(result.displacement_mm);
+    // Sensitivity of the result to each estimated modulus (two more factorisations each).
+    for (auto j : estimated) {
+        ModulusSensitivity m;
+        m.structure = j;
+        m.voxel_mm = objective.structure_voxel_mm(j);
+        const std::vector<std::int32_t> nodes = objective.structure_term_nodes(j);
+        for (double factor : {2.0, 0.5}) {
+            std::vector<double> e = result.young_moduli_pa;
+            e[j] *= factor;
+            model.set_young_moduli(e);
+            const SegmentationGradient changed = evaluate(x);
+            double sum = 0.0;
+            for (auto n : nodes)
+                for (int c = 0; c < 3; ++c) {
+                    const double d = changed.displacement_mm[3 * n + c] - result.displacement_mm[3 * n + c];
+                    sum += d * d;
+                }
+            const double rms = nodes.empty() ? 0.0 : std::sqrt(sum / static_cast<double>(nodes.size()));
+            (factor > 1 ? m.boundary_change_doubled_mm : m.boundary_change_halved_mm) = rms;
+            (factor > 1 ? m.objective_change_doubled_mm2 : m.objective_change_halved_mm2) = changed.objective_mm2 - final_state.objective_mm2;
+        }
+        m.determined = std::max(m.boundary_change_doubled_mm, m.boundary_change_halved_mm) >= 0.1 * m.voxel_mm;
+        result.sensitivity.push_back(m);
+    }
+    model.set_young_moduli(result.young_moduli_pa);
+    result.prior_mm2 = moduli_prior(context, result.young_moduli_pa);
     result.rms_distance_mm = objective.rms_distance_mm(result.displacement_mm);
     result.evaluations = context.evaluations;
     result.factorisations = model.factorisations();

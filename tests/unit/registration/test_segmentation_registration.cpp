@@ -215,6 +215,49 @@ TEST(SegmentationRegistration, MultiStructureMeshIsConformingAndTheObjectiveSees
     EXPECT_LT(objective.rms_distance_mm(zero), 0.6); // the mesh sits on its own segmentation
 }
 
+// Issue 28's floor: the mesh's boundary is not the voxel boundary, so registering a segmentation to
+// itself moves the model by the mesh's own misfit — unless every node keeps its rest offset.
+TEST(SegmentationObjective, RestOffsetsLetASegmentationRegisteredToItselfStayPut)
+{
+    const LabelVolume labels = cube_with_inclusion();
+    const VolumeMesh mesh = mesh_of(labels, 4.0);
+    const SignedDistanceMap cube(labels, {1}, "cube"), inclusion(labels, {2}, "inclusion");
+    SegmentationObjective plain(mesh, {1, 2}, {&cube, &inclusion}, "plain"), offset(mesh, {1, 2}, {&cube, &inclusion}, "offset");
+    offset.set_rest_offsets({&cube, &inclusion});
+    ASSERT_TRUE(offset.has_rest_offsets());
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(mesh.node_count()));
+    Eigen::VectorXd g_plain, g_offset;
+    EXPECT_GT(plain.evaluate(zero, &g_plain), 0.0); // CGAL's facets sit within the facet distance of the voxel boundary
+    EXPECT_EQ(plain.rest_offset_stats_mm().first, 0.0);
+    EXPECT_GT(offset.rest_offset_stats_mm().second, 0.02);
+    EXPECT_DOUBLE_EQ(offset.evaluate(zero, &g_offset), 0.0);
+    EXPECT_DOUBLE_EQ(offset.rms_distance_mm(zero), 0.0);
+    EXPECT_EQ(g_offset.norm(), 0.0);
+    EXPECT_GT(g_plain.norm(), 0.0);
+    // Moving away from the rest state costs.
+    Eigen::VectorXd shift(zero.size());
+    for (Eigen::Index i = 0; i < shift.size(); ++i) shift[i] = i % 3 == 0 ? 0.7 : 0.0;
+    EXPECT_GT(offset.evaluate(shift, nullptr), 0.0);
+    // The registration of the segmentation to itself: the offsets keep the model at rest, the
+    // plain objective moves it.
+    LinearElasticOptions elastic;
+    elastic.fixed_nodes = nodes_below(mesh, 5.0);
+    LinearElasticModel probe(mesh, elastic, "probe");
+    std::vector<std::int32_t> force_nodes;
+    for (auto n : outer_boundary_nodes(mesh))
+        if (!probe.fixed()[static_cast<std::size_t>(n)]) force_nodes.push_back(n);
+    SegmentationRegistrationOptions options;
+    options.max_cycles = 5;
+    const auto moved = [&](const SegmentationObjective& objective) {
+        const auto r = register_segmentation(mesh, elastic, objective, force_nodes, {3000.0, 3000.0}, options);
+        return r.displacement_mm.cwiseAbs().maxCoeff();
+    };
+    EXPECT_LT(moved(offset), 1e-9);
+    EXPECT_GT(moved(plain), 0.05);
+    // Maps in another count than the structures are refused.
+    EXPECT_THROW(offset.set_rest_offsets({&cube}), Error);
+}
+
 TEST(SegmentationObjective, ReverseTermSeesWhatNoModelNodeReachesWithAnExactGradient)
 {
     // The model: a 24 mm cube. The fixed segmentation: the same cube with a rod (2 × 2 mm, 10 mm
@@ -390,6 +433,76 @@ INSTANTIATE_TEST_SUITE_P(SegmentationRegistration, AdjointGradient,
                          ::testing::Values(BoundaryParametrisation::nodal_forces, BoundaryParametrisation::surface_displacement),
                          [](const auto& info) { return info.param == BoundaryParametrisation::nodal_forces ? "nodal_forces" : "surface_displacement"; });
 
+// Issue 28's large-deformation lever: co-rotational elasticity with frozen rotations. A rigid
+// rotation costs nothing (the small-strain law resists it), and the adjoint gradient in the moduli
+// stays exact with the rotation load b(E).
+TEST(SegmentationRegistration, CorotationalLawFreesRigidRotationsAndKeepsTheAdjointExact)
+{
+    Problem p;
+    build_problem(p, 4.0);
+    LinearElasticModel& model = *p.clamped;
+    model.set_young_moduli({2500.0, 6000.0});
+    const auto n = static_cast<Eigen::Index>(p.mesh.node_count());
+    const Eigen::Matrix3d r = Eigen::AngleAxisd(1.0, Eigen::Vector3d(1, 2, 2).normalized()).toRotationMatrix(); // 57.3°
+    Eigen::VectorXd rigid(3 * n);
+    for (Eigen::Index v = 0; v < n; ++v) rigid.segment<3>(3 * v) = (r - Eigen::Matrix3d::Identity()) * p.mesh.nodes[static_cast<std::size_t>(v)];
+    Eigen::VectorXd linear_force, corotational_force, load;
+    model.multiply(rigid, linear_force);
+    model.set_element_rotations(rigid);
+    EXPECT_NEAR(model.largest_rotation_deg(), 57.2958, 1e-3);
+    model.multiply(rigid, corotational_force);
+    model.rotation_load(load);
+    EXPECT_GT(linear_force.norm(), 1e-3);
+    EXPECT_LT((corotational_force - load).norm(), 1e-9 * linear_force.norm()) << "a rigid rotation must cost nothing";
+    // The solve reproduces the rotation from its boundary values alone (no force inside).
+    Eigen::VectorXd solved;
+    model.solve_prescribed(load, rigid, solved);
+    EXPECT_LT((solved - rigid).cwiseAbs().maxCoeff(), 1e-8);
+
+    // Adjoint gradient in log E at frozen rotations (taken at a non-rigid state).
+    std::mt19937 random(5);
+    std::normal_distribution<double> normal(0.0, 1.0);
+    Eigen::VectorXd state(3 * n); // smooth, so that no sliver inverts
+    for (Eigen::Index v = 0; v < n; ++v) {
+        const Vec3& q = p.mesh.nodes[static_cast<std::size_t>(v)];
+        state.segment<3>(3 * v) = Vec3(std::sin(q.y() / 7.0), std::cos(q.z() / 9.0), std::sin(q.x() / 5.0));
+    }
+    model.set_element_rotations(rigid * 0.3 + state);
+    Eigen::VectorXd x(3 * static_cast<Eigen::Index>(p.force_nodes.size()));
+    for (auto& v : x) v = 0.5 * normal(random);
+    const std::vector<double> moduli{2500.0, 6000.0};
+    model.set_young_moduli(moduli);
+    const SegmentationGradient g = evaluate_segmentation_gradient(model, *p.objective, p.force_nodes, BoundaryParametrisation::surface_displacement, 1.0, x);
+    int checked = 0;
+    for (std::size_t j = 0; j < 2; ++j) {
+        const auto along = [&](double t) {
+            std::vector<double> e = moduli;
+            e[j] *= std::exp(t);
+            model.set_young_moduli(e);
+            return evaluate_segmentation_gradient(model, *p.objective, p.force_nodes, BoundaryParametrisation::surface_displacement, 1.0, x).objective_mm2;
+        };
+        for (double h : {1e-4, 3e-5, 1e-5}) {
+            const double full = (along(h) - along(-h)) / (2 * h), half = (along(h / 2) - along(-h / 2)) / h;
+            if (std::abs(full - half) > 2e-6 * std::abs(half)) continue;
+            ++checked;
+            EXPECT_NEAR(g.d_log_modulus[j], half, 1e-5 * std::abs(half)) << "modulus " << j;
+            EXPECT_GT(std::abs(half), 1e-6 * g.objective_mm2);
+            break;
+        }
+    }
+    EXPECT_EQ(checked, 2);
+    // Every element inverted (a point reflection, x = −X): counted, each given the rotation that
+    // pushes it back out; a non-finite state is refused.
+    const Eigen::VectorXd reflection = -2.0 * Eigen::Map<const Eigen::VectorXd>(p.mesh.nodes[0].data(), 3 * n);
+    EXPECT_EQ(model.inverted_elements(reflection), p.mesh.cell_count());
+    EXPECT_EQ(model.inverted_elements(rigid), 0u);
+    model.set_element_rotations(reflection);
+    EXPECT_EQ(model.inverted_at_rotations(), p.mesh.cell_count());
+    Eigen::VectorXd bad = rigid;
+    bad[0] = std::nan("");
+    EXPECT_THROW(model.set_element_rotations(bad), Error);
+}
+
 class Alternation : public ::testing::TestWithParam<BoundaryParametrisation> {};
 
 TEST_P(Alternation, FitsTheReferenceAndMovesTheModulusTowardTheTruth)
@@ -416,6 +529,47 @@ TEST_P(Alternation, FitsTheReferenceAndMovesTheModulusTowardTheTruth)
     EXPECT_LT(r.young_moduli_pa[1], 3000.0 * 12.0) << r.stop_reason << trajectory;
     // The reported boundary load is in equilibrium with the support: K u = F at the free nodes.
     EXPECT_GT(r.force_n.norm(), 0.0);
+}
+
+// Issue 28's log-normal prior: the estimated modulus is pulled toward the table's value, the more
+// the heavier the prior, and the objective actually minimised (data term + prior) never rises.
+TEST(SegmentationRegistration, ModuliPriorPullsTheEstimateTowardTheTableInProportionToItsWeight)
+{
+    Problem p;
+    build_problem(p, 6.0); // truth: inclusion 18 kPa in a 3 kPa cube
+    const auto run = [&](double factor, double rms_mm) {
+        SegmentationRegistrationOptions options;
+        options.max_cycles = 12;
+        options.moduli_prior_factor = factor;
+        options.moduli_prior_rms_mm = rms_mm;
+        return register_segmentation(p.mesh, p.options, *p.objective, p.force_nodes, {3000.0, 3000.0}, options);
+    };
+    const SegmentationRegistrationResult free = run(0.0, 0.1), weak = run(2.0, 0.01), strong = run(1.2, 1.0);
+    EXPECT_EQ(free.prior_mm2, 0.0);
+    for (const auto* r : {&weak, &strong}) {
+        ASSERT_GE(r->history.size(), 2u);
+        for (std::size_t c = 1; c < r->history.size(); ++c)
+            EXPECT_LE(r->history[c].objective_mm2 + r->history[c].prior_mm2, (r->history[c - 1].objective_mm2 + r->history[c - 1].prior_mm2) * (1 + 1e-9));
+        // Π as documented: ½ N r² (ln(E/E⁰) / ln f)² for the one estimated structure.
+        EXPECT_DOUBLE_EQ(r->young_moduli_pa[0], 3000.0);
+    }
+    const double n = static_cast<double>(p.objective->term_count());
+    const double z = std::log(strong.young_moduli_pa[1] / 3000.0) / std::log(1.2);
+    EXPECT_NEAR(strong.prior_mm2, 0.5 * n * 1.0 * z * z, 1e-9 * strong.prior_mm2 + 1e-12);
+    const double e_free = free.young_moduli_pa[1], e_weak = weak.young_moduli_pa[1], e_strong = strong.young_moduli_pa[1];
+    EXPECT_GT(e_free, 3000.0 * 1.5);
+    EXPECT_LT(e_weak, e_free);
+    EXPECT_GT(e_weak, e_strong);
+    EXPECT_LT(std::abs(std::log(e_strong / 3000.0)), 0.5 * std::log(e_free / 3000.0)) << e_strong << " vs free " << e_free;
+    // The prior costs data fit: the free fit's data term is the lowest.
+    EXPECT_LE(free.objective_mm2, strong.objective_mm2 * (1 + 1e-6));
+    // Impossible settings are refused, naming the parameter.
+    SegmentationRegistrationOptions bad;
+    bad.moduli_prior_factor = 0.5;
+    EXPECT_THROW(bad.validate(), Error);
+    bad.moduli_prior_factor = 2.0;
+    bad.moduli_prior_rms_mm = 0.0;
+    EXPECT_THROW(bad.validate(), Error);
 }
 
 INSTANTIATE_TEST_SUITE_P(SegmentationRegistration, Alternation,

@@ -9,6 +9,12 @@
 // position at every node, N/mm) regularises free-floating structures. A system with neither is
 // singular and refused. The factorisation (CHOLMOD, analysis reused) is made once per set of moduli
 // and serves every solve with it: the state solve and the adjoint solve of an evaluation.
+//
+// Large deformation (issue 28): the co-rotational law with *frozen* rotations. Given a displacement
+// ū, each tetrahedron's rotation R_e (polar decomposition of its deformation gradient) is fixed, and
+// the element force R_e K_e (R_eᵀ x − X) becomes affine in u: K_R u − b, K_R = Σ R K Rᵀ, b = Σ R K
+// (X − Rᵀ X). Both stay linear in each E_j, so the adjoint gradients keep their form (with b's
+// derivative); refreshing the rotations between solves gives the co-rotational equilibrium.
 #include "physreg/mechanics/linear/linear_solver.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
 
@@ -61,6 +67,21 @@ public:
     double structure_form(std::size_t j, const Eigen::VectorXd& a, const Eigen::VectorXd& b) const;
     /// y = K x (all nodes; rows of fixed nodes are the reaction forces).
     void multiply(const Eigen::VectorXd& x, Eigen::VectorXd& y) const;
+    /// Freezes each tetrahedron's co-rotational rotation at displacement u (mm, 3 per node) and
+    /// refactorises K = K_R; solves then include the rotation load b (see rotation_load). An
+    /// element inverted at u gets the rotation that pushes it back out (corotation()); they are
+    /// counted (inverted_at_rotations).
+    void set_element_rotations(const Eigen::VectorXd& u);
+    bool rotated() const { return !m_rest_unit_stiffness.empty(); }
+    /// b(E) (N, 3 per node, zero without rotations): the co-rotational law's load at frozen rotations.
+    void rotation_load(Eigen::VectorXd& b) const;
+    /// aᵀ b̂_j, N·mm per MPa (the derivative of aᵀ b with respect to E_j in MPa; 0 without rotations).
+    double structure_rotation_load(std::size_t j, const Eigen::VectorXd& a) const;
+    /// The largest element rotation angle of the frozen rotations, degrees (0 without).
+    double largest_rotation_deg() const { return m_largest_rotation_deg; }
+    std::size_t inverted_at_rotations() const { return m_inverted_at_rotations; }
+    /// Tetrahedra with non-positive volume at displacement u.
+    std::size_t inverted_elements(const Eigen::VectorXd& u) const;
     /// Mean diagonal entry of K per free degree of freedom, N/mm (a typical nodal stiffness).
     double mean_diagonal_n_mm() const;
     int factorisations() const { return m_factorisations; }
@@ -71,7 +92,12 @@ private:
     std::size_t m_node_count = 0;
     std::vector<std::int32_t> m_cells;           ///< 4 per cell
     std::vector<int> m_cell_structure;
-    std::vector<double> m_unit_stiffness;        ///< 144 per cell (E = 1 MPa)
+    std::vector<double> m_unit_stiffness;        ///< 144 per cell (E = 1 MPa; rotated when rotations are frozen)
+    std::vector<double> m_rest_unit_stiffness;   ///< the unrotated copy (empty: no rotations)
+    std::vector<double> m_unit_rotation_load;    ///< 12 per cell: R K̂ (X − Rᵀ X) (empty: none)
+    std::vector<double> m_rest_positions;        ///< 12 per cell, mm
+    double m_largest_rotation_deg = 0.0;
+    std::size_t m_inverted_at_rotations = 0;
     std::vector<std::int32_t> m_entry;           ///< 144 per cell: value index in K (−1: a fixed dof)
     std::vector<std::int32_t> m_labels;
     std::vector<std::uint8_t> m_reference;

@@ -45,11 +45,15 @@ public:
                           std::vector<const SignedDistanceMap*> maps, const std::string& what);
     /// Φ (mm²) at displacement u (mm, 3 per node); gradient ∂Φ/∂u (mm) when asked.
     double evaluate(const Eigen::VectorXd& u, Eigen::VectorXd* gradient) const;
-    /// Root mean square of φ over the terms (mm) at u.
+    /// Root mean square of φ over the terms (mm) at u (less the rest offsets, when set).
     double rms_distance_mm(const Eigen::VectorXd& u) const;
-    /// Per structure: mean and max |φ| (mm) at u.
+    /// Per structure: mean and max |φ| (mm) at u (the plain distance, without the rest offsets).
     std::vector<std::pair<double, double>> per_structure_distance_mm(const Eigen::VectorXd& u) const;
     std::size_t term_count() const { return m_nodes.size(); }
+    /// The boundary nodes whose terms belong to structure j (empty for a structure without a map).
+    std::vector<std::int32_t> structure_term_nodes(std::size_t j) const;
+    /// The finest voxel spacing of structure j's map, mm (0 without a map).
+    double structure_voxel_mm(std::size_t j) const;
     /// −φ ∇φ/|∇φ| at the rest position, averaged over a node's terms (zero for nodes without one).
     std::vector<Vec3> distance_vectors() const;
 
@@ -63,6 +67,18 @@ public:
     /// represent, e.g. a vessel branch thinner than its cells).
     void add_reverse_term();
     bool symmetric() const { return !m_targets.empty(); }
+
+    /// Each boundary node keeps its rest distance to the *moving* segmentation's boundary (issue 28,
+    /// the floor of the method): the mesh's boundary is not the voxel boundary (it lies within the
+    /// facet distance of it and rounds its steps), so asking a node that sits δ inside the moving
+    /// structure to land exactly on the fixed structure's boundary moves it, and the inside with it,
+    /// by δ whatever the truth. The terms become ½ (φ_s(x + u) − φ'_s(x))², φ'_s the moving
+    /// structure's signed distance map (`moving_maps`, the same order as the structures; nullptr for
+    /// none). The reverse term, if any, is unchanged.
+    void set_rest_offsets(const std::vector<const SignedDistanceMap*>& moving_maps);
+    bool has_rest_offsets() const { return !m_offsets.empty(); }
+    /// Per term offset φ'_s(x) at rest, mm (empty without rest offsets): mean and max |·|.
+    std::pair<double, double> rest_offset_stats_mm() const;
     std::size_t reverse_point_count() const;
 
 private:
@@ -72,6 +88,8 @@ private:
     std::vector<std::int32_t> m_nodes;
     std::vector<int> m_structures;
     std::vector<const SignedDistanceMap*> m_maps;
+    std::vector<double> m_offsets; ///< per term (empty: none)
+    double offset(std::size_t t) const { return m_offsets.empty() ? 0.0 : m_offsets[t]; }
     struct ReverseTargets {
         std::vector<Vec3> points;           ///< on the structure's zero level, mm
         std::vector<std::int32_t> nodes;    ///< the structure's boundary nodes
@@ -96,14 +114,37 @@ struct SegmentationRegistrationOptions {
     /// Stop when a cycle lowers Φ by less than this fraction of Φ.
     double relative_tolerance = 1e-3;
     bool estimate_moduli = true;
+    /// Log-normal prior on the estimated moduli around their initial values (the tissue table), as
+    /// issue 28 asks: Π = ½ N r² Σ_j (ln(E_j/E_j⁰) / ln f)², N the objective's terms. f (> 1; 0 =
+    /// no prior, free ratios) is the factor one standard deviation away; r (mm) says what one σ
+    /// costs — as much as an rms boundary distance of r over every term.
+    double moduli_prior_factor = 0.0;
+    double moduli_prior_rms_mm = 0.1;
+    /// Large deformation (issue 28): the co-rotational law, its element rotations refreshed from the
+    /// current state at the start of every cycle and frozen within it (LinearElasticModel::
+    /// set_element_rotations). false: paper 002's small-strain law.
+    bool corotational = false;
     void validate() const;
 };
 
 struct SegmentationCycle {
     int cycle = 0;
-    double objective_mm2 = 0.0, rms_distance_mm = 0.0;
+    double objective_mm2 = 0.0, rms_distance_mm = 0.0; ///< the data term Φ alone (without the prior)
+    double prior_mm2 = 0.0;                            ///< Π at the cycle's moduli
     std::vector<double> young_moduli_pa;
     int evaluations = 0;
+};
+
+/// Whether the data can tell a structure's modulus (issue 28): the estimated modulus doubled and
+/// halved, the boundary load and the other moduli held, and what that does to the structure's own
+/// boundary and to the data term. A modulus whose doubling moves its structure's boundary by less
+/// than a tenth of a voxel (rms) is not determined by segmentations of that resolution.
+struct ModulusSensitivity {
+    std::size_t structure = 0;
+    double boundary_change_doubled_mm = 0.0, boundary_change_halved_mm = 0.0; ///< rms over the structure's boundary nodes
+    double objective_change_doubled_mm2 = 0.0, objective_change_halved_mm2 = 0.0; ///< Φ(×2) − Φ, Φ(×½) − Φ
+    double voxel_mm = 0.0;
+    bool determined = false; ///< max(boundary changes) ≥ 0.1 voxel
 };
 
 struct SegmentationRegistrationResult {
@@ -111,7 +152,11 @@ struct SegmentationRegistrationResult {
     std::vector<double> young_moduli_pa;        ///< per structure
     std::vector<std::uint8_t> estimated;        ///< per structure: 1 estimated, 0 held (reference)
     std::vector<SegmentationCycle> history;     ///< cycle 0 = the initial guess
+    std::vector<ModulusSensitivity> sensitivity; ///< per estimated structure, at the result
     double initial_objective_mm2 = 0.0, objective_mm2 = 0.0, initial_rms_mm = 0.0, rms_distance_mm = 0.0;
+    double prior_mm2 = 0.0; ///< Π at the final moduli (0 without a prior)
+    double largest_rotation_deg = 0.0; ///< the co-rotational law's largest element rotation (0: linear law)
+    std::size_t inverted_elements = 0; ///< tetrahedra with non-positive volume at the result
     int evaluations = 0, factorisations = 0;
     std::string stop_reason;
     double seconds = 0.0, factorisation_s = 0.0, solve_s = 0.0;
