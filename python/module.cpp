@@ -19,6 +19,10 @@
 #include "physreg/mesh/surface_extraction.hpp"
 #include "physreg/mesh/tetrahedral_meshing.hpp"
 #include "physreg/model/tissue_table.hpp"
+#include "physreg/field/displacement_sampling.hpp"
+#include "physreg/mesh/point_location.hpp"
+#include "physreg/registration/surface/surface_model.hpp"
+#include "physreg/registration/surface/surface_registration.hpp"
 
 #include <pybind11/functional.h>
 #include <pybind11/numpy.h>
@@ -362,6 +366,152 @@ PYBIND11_MODULE(_physreg, m)
         return d;
     }, py::arg("first"), py::arg("second"),
           "Sampled symmetric Hausdorff distance between two surfaces (vertices and triangle centroids to the exact closest point), mm.");
+
+    // ---- in memory (issue 29): paper 001's registration of a model to a cloud held in numpy arrays ----
+    py::class_<SurfaceModel>(m, "SurfaceModel",
+                             "Paper 001's liver model: tetrahedra (every cell label 1) and its outer surface, whose triangles carry "
+                             "feature labels (0 surface, 1 umbilical notch, 2 anterior margin) that a cloud's labels are matched to.")
+        .def_static("from_labels", [](const py::array& labels, const ImageGeometry& geometry, std::optional<std::vector<std::int32_t>> liver_labels,
+                                      double cell_size_mm, std::optional<double> notch_x_mm, unsigned seed) {
+            if (!(cell_size_mm > 0) || !std::isfinite(cell_size_mm)) throw py::value_error(fmt::format("cell_size_mm: {} must be a positive number", cell_size_mm));
+            const LabelVolume v = label_volume_from(labels, geometry);
+            std::set<std::int32_t> liver;
+            if (liver_labels)
+                liver.insert(liver_labels->begin(), liver_labels->end());
+            else
+                for (auto l : v.labels)
+                    if (l != 0) liver.insert(l);
+            py::gil_scoped_release release;
+            return surface_model_from_labels(v, liver, cell_size_mm, notch_x_mm, seed, "labels");
+        }, py::arg("labels"), py::arg("geometry"), py::arg("liver_labels") = py::none(), py::arg("cell_size_mm") = 7.0, py::arg("notch_x_mm") = py::none(),
+           py::arg("seed") = 1u,
+           "Meshes the union of liver_labels (default: every non-zero label) of a uint16 label array [z, y, x] as register-surface --labels "
+           "does (largest circumradius cell_size_mm); regions by the anatomical rule, the umbilical notch at x = notch_x_mm when given.")
+        .def_static("from_mesh", [](const VolumeMesh& mesh) {
+            if (mesh.cell_type != CellType::tetrahedron) throw py::value_error("mesh: paper 001's model must hold tetrahedra");
+            SurfaceModel model;
+            model.mesh = mesh;
+            std::fill(model.mesh.cell_labels.begin(), model.mesh.cell_labels.end(), 1);
+            model.surface = unlabelled_boundary(model.mesh);
+            model.quality = measure_tetrahedra(model.mesh);
+            return model;
+        }, py::arg("mesh"), "A tetrahedral mesh as register-surface --model takes it: one material, its whole boundary 'surface' (label 0).")
+        .def_property_readonly("mesh", [](const SurfaceModel& model) { return model.mesh; }, "The tetrahedra (a copy).")
+        .def_property_readonly("surface_triangles", [](const SurfaceModel& model) {
+            py::array_t<std::int32_t> t({static_cast<py::ssize_t>(model.surface.triangles.size()), py::ssize_t{3}});
+            for (std::size_t r = 0; r < model.surface.triangles.size(); ++r)
+                for (int c = 0; c < 3; ++c) t.mutable_at(static_cast<py::ssize_t>(r), c) = model.surface.triangles[r][static_cast<std::size_t>(c)];
+            return t;
+        }, "(M, 3) int32 mesh node ids of the outer surface's triangles.")
+        .def_property_readonly("surface_labels", [](const SurfaceModel& model) {
+            return py::array_t<std::int32_t>(static_cast<py::ssize_t>(model.surface.labels.size()), model.surface.labels.data());
+        }, "(M,) int32 feature label per surface triangle.")
+        .def("__repr__", [](const SurfaceModel& model) {
+            return fmt::format("SurfaceModel({} nodes, {} tetrahedra, {} surface triangles)", model.mesh.node_count(), model.mesh.cell_count(), model.surface.triangles.size());
+        });
+
+    struct SurfaceRegistration {
+        VolumeMesh mesh;
+        SurfaceRegistrationResult result;
+    };
+    py::class_<SurfaceRegistration>(m, "SurfaceRegistration", "The result of register_surface_cloud: the model's nodal displacement and its dense field.")
+        .def_property_readonly("displacement", [](py::object self) {
+            auto& r = self.cast<SurfaceRegistration&>().result;
+            return py::array_t<double>({static_cast<py::ssize_t>(r.displacement_mm.size() / 3), py::ssize_t{3}}, r.displacement_mm.data(), self);
+        }, "(N, 3) float64 nodal displacement, mm (a view)")
+        .def_property_readonly("mesh", [](const SurfaceRegistration& r) { return r.mesh; }, "The model's tetrahedra at rest (a copy).")
+        .def_property_readonly("steps", [](const SurfaceRegistration& r) { return r.result.steps; })
+        .def_property_readonly("factorisations", [](const SurfaceRegistration& r) { return r.result.factorisations; })
+        .def_property_readonly("seconds", [](const SurfaceRegistration& r) { return r.result.seconds; })
+        .def_property_readonly("plateaus", [](const SurfaceRegistration& r) {
+            py::list out;
+            for (const auto& p : r.result.plateaus) {
+                py::dict d;
+                d["plateau"] = p.plateau;
+                d["steps"] = p.steps;
+                d["settled"] = p.reached;
+                d["pairs"] = p.matching.kept;
+                d["mean_pair_distance_mm"] = p.matching.mean_distance_mm;
+                d["stiffness_n"] = p.stiffness_n;
+                out.append(d);
+            }
+            return out;
+        }, "Per annealing plateau: steps, whether it settled, pairs kept, their mean distance (mm), stiffness per label (N).")
+        .def("field", [](const SurfaceRegistration& r, std::optional<ImageGeometry> geometry, double spacing_mm) {
+            if (!(spacing_mm > 0) || !std::isfinite(spacing_mm)) throw py::value_error(fmt::format("spacing_mm: {} must be a positive number", spacing_mm));
+            const ImageGeometry g = geometry ? *geometry : image_grid_over_mesh(r.mesh, spacing_mm, 2 * spacing_mm);
+            DisplacementField f;
+            {
+                py::gil_scoped_release release;
+                f = sample_displacement_field(r.mesh, r.result.displacement_mm, g).field;
+            }
+            const ImageGeometry fg = f.geometry;
+            return py::make_tuple(image_array(std::move(f), &DisplacementField::components, 3), fg);
+        }, py::arg("geometry") = py::none(), py::arg("spacing_mm") = 2.0,
+           "The dense field (float32 [z, y, x, 3], mm, LPS; 0 outside the model) on `geometry`, or on a grid of spacing_mm over the model "
+           "with a 2-voxel margin (as register-surface writes displacement.nii.gz) → (array, ImageGeometry).")
+        .def("map_points", [](const SurfaceRegistration& r, const py::array& points, double max_distance_mm) {
+            const std::vector<Vec3> p = points_from(points, "points");
+            LandmarkSet set(p.size());
+            for (std::size_t n = 0; n < p.size(); ++n) set[n] = {std::to_string(n + 1), p[n], LandmarkType::unspecified};
+            const auto where = embed_landmarks(r.mesh, set, max_distance_mm, "points");
+            const LandmarkSet moved = displace_landmarks(r.mesh, where, set, r.result.displacement_mm);
+            py::array_t<double> out({static_cast<py::ssize_t>(moved.size()), py::ssize_t{3}});
+            for (std::size_t n = 0; n < moved.size(); ++n)
+                for (int a = 0; a < 3; ++a) out.mutable_at(static_cast<py::ssize_t>(n), a) = moved[n].position[a];
+            return out;
+        }, py::arg("points"), py::arg("max_distance_mm") = 10.5,
+           "Rest positions (N, 3) mm (targets, landmarks) carried by the model's displacement; a point farther than max_distance_mm "
+           "from the model is an error.");
+
+    m.def("register_surface_cloud", [](const SurfaceModel& model, const py::array& points, std::optional<py::array> labels, std::optional<py::array> normals,
+                                       double young_modulus_pa, double poisson_ratio, double traction_ratio, const std::string& support,
+                                       std::optional<std::vector<std::int32_t>> support_nodes, std::optional<py::function> progress) {
+        LabelledPointCloud cloud;
+        cloud.points = points_from(points, "points");
+        if (cloud.points.empty()) throw py::value_error("points: the cloud has no point");
+        if (labels) {
+            require_dtype(*labels, py::dtype::of<std::int32_t>(), "labels");
+            if (labels->ndim() != 1 || static_cast<std::size_t>(labels->shape(0)) != cloud.points.size())
+                throw py::value_error(fmt::format("labels: expected shape ({},)", cloud.points.size()));
+            const auto* l = static_cast<const std::int32_t*>(labels->cast<CArray<std::int32_t>>().data());
+            cloud.labels.assign(l, l + cloud.points.size());
+        } else {
+            cloud.labels.assign(cloud.points.size(), 0);
+        }
+        if (normals) {
+            cloud.normals = points_from(*normals, "normals");
+            if (cloud.normals.size() != cloud.points.size()) throw py::value_error(fmt::format("normals: {} rows for {} points", cloud.normals.size(), cloud.points.size()));
+        }
+        SurfaceCloudProblem problem;
+        problem.young_modulus_pa = young_modulus_pa;
+        problem.poisson_ratio = poisson_ratio;
+        problem.traction_ratio = traction_ratio;
+        if (support != "posterior" && support != "none") throw py::value_error(fmt::format("support: '{}' is not one of 'posterior', 'none'", support));
+        problem.posterior_support = support == "posterior";
+        if (support_nodes) problem.support_nodes = *support_nodes;
+        std::function<void(double, const std::string&)> report;
+        if (progress) {
+            py::function callback = *progress;
+            report = [callback](double fraction, const std::string& message) {
+                py::gil_scoped_acquire acquire;
+                callback(fraction, message);
+                if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+            };
+        }
+        SurfaceRegistration out{model.mesh, {}};
+        {
+            py::gil_scoped_release release;
+            out.result = register_surface_cloud(model.mesh, model.surface, cloud, problem, report);
+        }
+        return out;
+    }, py::arg("model"), py::arg("points"), py::arg("labels") = py::none(), py::arg("normals") = py::none(), py::arg("young_modulus_pa") = 3500.0,
+          py::arg("poisson_ratio") = 0.45, py::arg("traction_ratio") = 0.5, py::arg("support") = "posterior", py::arg("support_nodes") = py::none(),
+          py::arg("progress") = py::none(),
+          "Paper 001's biomechanical registration of `model` to a cloud held in memory — points (N, 3) mm LPS, optional int32 feature "
+          "labels (N,) (default: all 0, surface) and outward normals (N, 3) — with register-surface's defaults (co-rotational tetrahedra, "
+          "backward Euler, arctan pair forces annealed over paper 001's schedules, the posterior surface held). progress(fraction, "
+          "message) after every plateau. Returns a SurfaceRegistration.");
 
     m.def("run", [](const std::vector<std::string>& args, std::optional<py::function> progress) {
         struct Restore {

@@ -10,6 +10,10 @@ Building blocks (C++ core, arrays without copies where the layout allows):
     read_surface, write_surface, boundary_surface, Surface, read_landmarks, write_landmarks,
     tre, hausdorff
 
+In memory (numpy arrays in, result objects out; no files):
+    SurfaceModel (from_labels, from_mesh), register_surface_cloud → SurfaceRegistration
+    (.displacement, .field(), .map_points(), .plateaus)
+
 The commands of the `physreg` program, run in this process with the same checks and messages,
 each returning the summary it wrote (a dict):
     phantom, simulate, register_compression, register_surface, register_images, evaluate,
@@ -29,6 +33,8 @@ from ._physreg import (  # noqa: F401,E402
     ImageGeometry,
     Mesh,
     Surface,
+    SurfaceModel,
+    SurfaceRegistration,
     __version__,
     boundary_surface,
     hausdorff,
@@ -39,6 +45,7 @@ from ._physreg import (  # noqa: F401,E402
     read_landmarks,
     read_mesh,
     read_surface,
+    register_surface_cloud,
     tre,
     write_displacement_field,
     write_image,

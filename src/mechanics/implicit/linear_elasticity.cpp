@@ -63,7 +63,7 @@ double tetrahedron_unit_stiffness(const Vec3* x, double nu, double* k)
 }
 
 LinearElasticModel::LinearElasticModel(const VolumeMesh& mesh, const LinearElasticOptions& options, const std::string& what)
-    : m_node_count(mesh.node_count()), m_anchor(options.anchor_stiffness_n_mm), m_solver(LinearSolverOptions{LinearSolverKind::cholmod})
+    : m_node_count(mesh.node_count()), m_anchor(options.anchor_stiffness_n_mm), m_solver(LinearSolverOptions{options.reuse_factor ? LinearSolverKind::pcg_factor : LinearSolverKind::cholmod}), m_reuse_factor(options.reuse_factor)
 {
     mesh.validate(what);
     if (mesh.cell_type != CellType::tetrahedron) fail("{}: linear elasticity needs a tetrahedral mesh", what);
@@ -193,6 +193,12 @@ void LinearElasticModel::set_young_moduli(const std::vector<double>& young_modul
             if (entry[q] >= 0) values[entry[q]] += e_mpa * k[q];
     }
     for (auto d : m_diagonal_entry) values[d] += m_anchor;
+    if (m_reuse_factor) { // the next solve factorises when the earlier factor no longer preconditions well
+        m_factor_current = false;
+        m_pcg_s_since_change = 0.0;
+        m_factorisation_s += seconds_since(t0);
+        return;
+    }
     const LinearSolveStats stats = m_solver.factorise(m_k);
     ++m_factorisations;
     if (stats.shift > 0.0) fail("linear elasticity: K is not positive definite (a diagonal shift of {} was needed)", stats.shift);
@@ -301,11 +307,34 @@ void LinearElasticModel::solve(const Eigen::VectorXd& f, Eigen::VectorXd& u) con
     Eigen::VectorXd b(m_k.rows()), x(m_k.rows());
     for (std::size_t d = 0; d < m_dof_of.size(); ++d)
         if (m_dof_of[d] >= 0) b[m_dof_of[d]] = f[static_cast<Eigen::Index>(d)];
-    m_solver.solve_factored(b, x);
+    double factorising_s = 0.0;
+    if (m_reuse_factor && !m_factor_current) {
+        // CG on a K solved several times (the load phase holds E) costs more, summed, than one
+        // factorisation: factorise once the CG time spent on this K exceeds the last factorisation's.
+        LinearSolveStats stats;
+        if (m_solver.has_factor() && m_pcg_s_since_change > m_last_factorisation_s) {
+            stats = m_solver.factorise(m_k);
+            m_solver.solve_factored(b, x);
+        } else {
+            stats = m_solver.solve(m_k, b, x);
+            m_pcg_s_since_change += stats.solve_s;
+        }
+        m_pcg_iterations += stats.iterations;
+        if (stats.factorised) {
+            m_factor_current = true;
+            m_last_factorisation_s = stats.factorisation_s;
+            ++m_factorisations;
+            m_factorisation_s += stats.factorisation_s;
+            factorising_s = stats.factorisation_s;
+            if (stats.shift > 0.0) fail("linear elasticity: K is not positive definite (a diagonal shift of {} was needed)", stats.shift);
+        }
+    } else {
+        m_solver.solve_factored(b, x);
+    }
     u.setZero(static_cast<Eigen::Index>(3 * m_node_count));
     for (std::size_t d = 0; d < m_dof_of.size(); ++d)
         if (m_dof_of[d] >= 0) u[static_cast<Eigen::Index>(d)] = x[m_dof_of[d]];
-    m_solve_s += seconds_since(t0);
+    m_solve_s += seconds_since(t0) - factorising_s;
 }
 
 void LinearElasticModel::solve_prescribed(const Eigen::VectorXd& f, const Eigen::VectorXd& prescribed, Eigen::VectorXd& u) const

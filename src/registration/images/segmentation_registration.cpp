@@ -503,6 +503,7 @@ SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, con
     const auto t0 = std::chrono::steady_clock::now();
     const BoundaryParametrisation mode = options.parametrisation;
     LinearElasticOptions model_options = elastic;
+    model_options.reuse_factor = options.reuse_factor;
     if (mode == BoundaryParametrisation::surface_displacement) {
         model_options.fixed_nodes.insert(model_options.fixed_nodes.end(), force_nodes.begin(), force_nodes.end());
         std::sort(model_options.fixed_nodes.begin(), model_options.fixed_nodes.end());
@@ -632,6 +633,7 @@ SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, con
     result.rms_distance_mm = objective.rms_distance_mm(result.displacement_mm);
     result.evaluations = context.evaluations;
     result.factorisations = model.factorisations();
+    result.pcg_iterations = model.pcg_iterations();
     result.factorisation_s = model.factorisation_seconds();
     result.solve_s = model.solve_seconds();
     result.seconds = seconds_since(t0);

@@ -4,9 +4,12 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/evaluation/surface_distance.hpp"
+#include "physreg/registration/surface/surface_model.hpp"
 #include "../detail/principal_axes.hpp"
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <set>
 #include <chrono>
 #include <cmath>
 #include <fmt/format.h>
@@ -382,6 +385,37 @@ RobustRigidResult register_surface_rigid_robust(const std::vector<double>& rest,
                                    options.support_tolerance_mm);
     }
     return out;
+}
+
+SurfaceRegistrationResult register_surface_cloud(const VolumeMesh& mesh, const LabelledTriangles& surface, const LabelledPointCloud& cloud,
+                                                 const SurfaceCloudProblem& problem, const std::function<void(double, const std::string&)>& progress)
+{
+    if (mesh.cell_type != CellType::tetrahedron) fail("surface registration: the model must hold tetrahedra (paper 001's model)");
+    if (cloud.points.empty()) fail("surface registration: the cloud has no point");
+    if (!(problem.traction_ratio > 0.0) || !std::isfinite(problem.traction_ratio)) fail("surface registration: traction ratio {} must be > 0", problem.traction_ratio);
+    TledOptions tled;
+    tled.law = MaterialLaw::corotational;
+    const TledModel model(mesh, homogeneous_liver_tissues(problem.young_modulus_pa, problem.poisson_ratio), tled);
+    const SurfaceMatcher matcher(surface, mesh.node_count(), "the model's surface");
+    SurfaceRegistrationOptions options = problem.options;
+    options.fixed_nodes = problem.support_nodes;
+    for (auto n : problem.support_nodes)
+        if (n < 0 || static_cast<std::size_t>(n) >= mesh.node_count()) fail("surface registration: support node {} is not a node of the model ({} nodes)", n, mesh.node_count());
+    if (problem.posterior_support) {
+        const auto nodes = surface_nodes_facing(mesh, surface, Vec3::UnitY(), 0.5);
+        if (nodes.empty()) fail("surface registration: no surface node faces posterior (+y) in the model");
+        options.fixed_nodes.insert(options.fixed_nodes.end(), nodes.begin(), nodes.end());
+    }
+    std::sort(options.fixed_nodes.begin(), options.fixed_nodes.end());
+    options.fixed_nodes.erase(std::unique(options.fixed_nodes.begin(), options.fixed_nodes.end()), options.fixed_nodes.end());
+    std::set<std::int32_t> surface_nodes;
+    for (const auto& t : surface.triangles) surface_nodes.insert(t.begin(), t.end());
+    std::size_t held_on_surface = 0;
+    for (auto n : options.fixed_nodes) held_on_surface += surface_nodes.count(n);
+    if (!options.fixed_nodes.empty() && held_on_surface >= surface_nodes.size())
+        fail("surface registration: the supports take every one of the {} surface nodes; nothing is left free to meet the cloud", surface_nodes.size());
+    options.schedules = paper001_schedules(pair_stiffness_n(problem.traction_ratio, problem.young_modulus_pa, mean_point_spacing_mm(cloud.points)));
+    return register_surface_biomechanical(model, matcher, cloud, options, progress);
 }
 
 } // namespace physreg

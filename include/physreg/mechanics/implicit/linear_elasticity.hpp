@@ -30,6 +30,11 @@ struct LinearElasticOptions {
     double default_poisson_ratio = 0.45;
     std::vector<std::int32_t> fixed_nodes;        ///< u = 0
     double anchor_stiffness_n_mm = 0.0;           ///< spring to rest at every node (0: none)
+    /// Issue 30: solve K(E) u = f by CG preconditioned by the factor of an earlier K (pcg-factor,
+    /// renewed when CG needs more than 25 iterations) instead of factorising K for every set of
+    /// moduli: the modulus phase of paper 002's alternation changes E a little per evaluation.
+    /// Solutions agree with the direct ones to the CG tolerance (1e-10 relative residual).
+    bool reuse_factor = false;
 };
 
 class LinearElasticModel {
@@ -51,7 +56,8 @@ public:
     /// Volume per structure, mm³.
     const std::vector<double>& structure_volume_mm3() const { return m_volume; }
 
-    /// Sets the moduli (Pa, one per structure, in structure_labels() order) and factorises K.
+    /// Sets the moduli (Pa, one per structure, in structure_labels() order) and factorises K (with
+    /// reuse_factor: assembles K; the next solve decides whether to factorise).
     /// Throws Error for a non-positive or non-finite modulus (naming its label), or a K that is
     /// not positive definite.
     void set_young_moduli(const std::vector<double>& young_modulus_pa);
@@ -85,6 +91,7 @@ public:
     /// Mean diagonal entry of K per free degree of freedom, N/mm (a typical nodal stiffness).
     double mean_diagonal_n_mm() const;
     int factorisations() const { return m_factorisations; }
+    int pcg_iterations() const { return m_pcg_iterations; } ///< with reuse_factor: CG iterations over all solves
     double factorisation_seconds() const { return m_factorisation_s; }
     double solve_seconds() const { return m_solve_s; }
 
@@ -109,8 +116,12 @@ private:
     std::vector<double> m_young_pa;
     SparseMatrix m_k;
     mutable SymmetricSolver m_solver;
-    int m_factorisations = 0;
-    double m_factorisation_s = 0.0;
+    mutable int m_factorisations = 0;
+    mutable int m_pcg_iterations = 0;
+    mutable double m_factorisation_s = 0.0;
+    bool m_reuse_factor = false;
+    mutable bool m_factor_current = false; ///< reuse_factor: the factor is of K as it stands (solve directly)
+    mutable double m_pcg_s_since_change = 0.0, m_last_factorisation_s = 0.0;
     mutable double m_solve_s = 0.0;
 };
 

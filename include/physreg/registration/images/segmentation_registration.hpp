@@ -124,6 +124,9 @@ struct SegmentationRegistrationOptions {
     /// current state at the start of every cycle and frozen within it (LinearElasticModel::
     /// set_element_rotations). false: paper 002's small-strain law.
     bool corotational = false;
+    /// Issue 30: solves by CG preconditioned by an earlier factor, refactorising only when it has
+    /// gone stale (LinearElasticOptions::reuse_factor); false: a factorisation per set of moduli.
+    bool reuse_factor = true;
     void validate() const;
 };
 
@@ -157,7 +160,7 @@ struct SegmentationRegistrationResult {
     double prior_mm2 = 0.0; ///< Π at the final moduli (0 without a prior)
     double largest_rotation_deg = 0.0; ///< the co-rotational law's largest element rotation (0: linear law)
     std::size_t inverted_elements = 0; ///< tetrahedra with non-positive volume at the result
-    int evaluations = 0, factorisations = 0;
+    int evaluations = 0, factorisations = 0, pcg_iterations = 0;
     std::string stop_reason;
     double seconds = 0.0, factorisation_s = 0.0, solve_s = 0.0;
 };

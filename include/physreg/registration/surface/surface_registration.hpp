@@ -85,6 +85,23 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
                                                          const SurfaceRegistrationOptions& options,
                                                          const std::function<void(double, const std::string&)>& progress = {});
 
+/// The register-surface command's biomechanical method on a model and a cloud held in memory (the
+/// Python API's entry, issue 29): one homogeneous co-rotational material, paper 001's schedules with
+/// k_max = pair_stiffness_n(traction ratio, E, the cloud's mean spacing), the posterior surface held
+/// as the command's default support, and the options' matching, force law and dynamics.
+struct SurfaceCloudProblem {
+    double young_modulus_pa = 3500.0;        ///< paper 001's healthy liver
+    double poisson_ratio = 0.45;
+    double traction_ratio = 0.5;             ///< the largest pair traction as a fraction of E
+    bool posterior_support = true;           ///< hold the surface nodes facing +y (normal · +y > 0.5)
+    std::vector<std::int32_t> support_nodes; ///< held as well (node ids)
+    SurfaceRegistrationOptions options;      ///< its schedules and fixed nodes are set from the above
+};
+/// Throws Error as register_surface_biomechanical does, and for supports that take every surface node.
+SurfaceRegistrationResult register_surface_cloud(const VolumeMesh& mesh, const LabelledTriangles& surface, const LabelledPointCloud& cloud,
+                                                 const SurfaceCloudProblem& problem,
+                                                 const std::function<void(double, const std::string&)>& progress = {});
+
 struct RigidSurfaceResult {
     Mat3 rotation = Mat3::Identity();
     Vec3 translation = Vec3::Zero();          ///< x ↦ R x + t, mm

@@ -1,0 +1,81 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Registration on objects held in memory (issue 29): a model from a label array or a mesh, a cloud
+from numpy arrays, a result carrying the nodal displacement and the dense field — checked against
+the same registration run through files by the program's register-surface."""
+import numpy as np
+import pytest
+
+import physreg
+
+
+@pytest.fixture(scope="module")
+def model_and_cloud(dataset, tmp_path_factory):
+    """The small phantom's liver as paper 001's model (through a .vtu, so that the file run reads
+    the very same nodes), and a cloud: its anterior surface nodes pushed 4 mm in, smoothly."""
+    labels, geometry = physreg.read_labels(dataset / "rest" / "labels.nii.gz")
+    meshed = physreg.SurfaceModel.from_labels(labels, geometry, liver_labels=[2, 3, 4], cell_size_mm=10.0)
+    folder = tmp_path_factory.mktemp("in_memory")
+    physreg.write_mesh(folder / "model.vtu", meshed.mesh)
+    model = physreg.SurfaceModel.from_mesh(physreg.read_mesh(folder / "model.vtu"))
+    nodes = model.mesh.nodes
+    on_surface = np.unique(model.surface_triangles)
+    front = on_surface[nodes[on_surface, 1] < np.percentile(nodes[on_surface, 1], 40)]
+    centre = nodes[front].mean(axis=0)
+    push = 4.0 * np.exp(-np.sum((nodes[front] - centre) ** 2, axis=1) / (2 * 25.0 ** 2))
+    cloud = nodes[front] + np.outer(push, [0.0, 1.0, 0.0])  # +y: posterior, into the organ
+    # Written with repr(), which reads back to the same doubles.
+    with open(folder / "cloud.csv", "w") as f:
+        f.write("x,y,z\n")
+        for p in cloud:
+            f.write(",".join(repr(float(c)) for c in p) + "\n")
+    return model, cloud, folder
+
+
+def test_a_cloud_in_memory_registers_as_the_same_cloud_through_files(model_and_cloud):
+    model, cloud, folder = model_and_cloud
+    assert model.surface_triangles.shape[1] == 3 and set(np.unique(model.surface_labels)) == {0}
+    calls = []
+    result = physreg.register_surface_cloud(model, cloud, progress=lambda f, message: calls.append((f, message)))
+    u = result.displacement
+    assert u.shape == (model.mesh.node_count, 3) and np.isfinite(u).all()
+    assert calls and all(0.0 <= f <= 1.0 for f, _ in calls)
+    assert result.plateaus and result.steps > 0
+    # The model moved toward the cloud: the pushed nodes moved +y, by up to about the push.
+    assert 1.0 < u[:, 1].max() < 6.0
+
+    summary = physreg.register_surface(folder / "files", model=folder / "model.vtu", cloud=folder / "cloud.csv", quiet=True)
+    assert summary["methods"]["biomechanical"]["time_steps"] == result.steps
+    field_file, geometry = physreg.read_displacement_field(folder / "files" / "displacement.nii.gz")
+    field_memory, same_geometry = result.field(geometry)
+    assert field_memory.shape == field_file.shape and field_memory.dtype == np.float32
+    assert np.allclose(same_geometry.origin, geometry.origin) and np.allclose(same_geometry.spacing, geometry.spacing)
+    assert np.max(np.abs(field_memory - field_file)) <= 1e-6  # the same run: equal to float32 rounding
+    assert np.max(np.abs(field_memory)) > 1.0
+
+    # Points carried by the displacement: a node's rest position lands on its displaced position.
+    node = int(np.argmax(np.linalg.norm(u, axis=1)))
+    moved = result.map_points(model.mesh.nodes[node:node + 1].copy())
+    assert np.allclose(moved[0], model.mesh.nodes[node] + u[node], atol=1e-9)
+
+
+def test_bad_arrays_are_refused_with_the_argument_named(model_and_cloud):
+    model, cloud, _ = model_and_cloud
+    bad = cloud.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(ValueError, match="points: row 3 is not finite"):
+        physreg.register_surface_cloud(model, bad)
+    with pytest.raises(ValueError, match="labels: expected shape"):
+        physreg.register_surface_cloud(model, cloud, labels=np.zeros(len(cloud) - 1, dtype=np.int32))
+    with pytest.raises(TypeError, match="labels: expected dtype int32"):
+        physreg.register_surface_cloud(model, cloud, labels=np.zeros(len(cloud)))
+    with pytest.raises(ValueError, match="support: 'sideways'"):
+        physreg.register_surface_cloud(model, cloud, support="sideways")
+    with pytest.raises(physreg.Error, match="label 2"):
+        # The model's surface has no anterior-margin region (label 2) to match such points to.
+        physreg.register_surface_cloud(model, cloud, labels=np.full(len(cloud), 2, dtype=np.int32))
+    with pytest.raises(physreg.Error, match="support node"):
+        physreg.register_surface_cloud(model, cloud, support_nodes=[model.mesh.node_count + 5])
+    with pytest.raises(ValueError, match="paper 001's model must hold tetrahedra"):
+        labels = np.zeros((6, 6, 6), dtype=np.uint16)
+        labels[1:5, 1:5, 1:5] = 1
+        physreg.SurfaceModel.from_mesh(physreg.mesh_from_labels(labels, physreg.ImageGeometry((0, 0, 0), (2, 2, 2), None)))
