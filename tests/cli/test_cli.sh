@@ -490,17 +490,17 @@ for name in ("initial_alignment", "biomechanical", "rigid_labels", "demons_label
 PY
 expect_error "register-images: unknown initial alignment" "--initial 'affine'" "$physreg" $ri --dataset "$ph" --initial affine -o "$work/ri_bad_initial"
 expect_no_file "$work/ri_bad_initial"
-# A dataset's states share one frame: the alignment is applied only when it gains more than the
-# asked minimum (an impossible gain of 1 km: never applied; 0: always).
-expect_ok "register-images: the alignment not applied below --initial-min-gain" "$physreg" --no-report --log-level warn register-images --cycles 1 \
-  --cell-size 12 --baselines none --dataset "$ph" --initial-min-gain 1e6 -o "$work/ri_min_gain"
-python3 - "$work/ri_min_gain/summary.json" <<'PY' && pass || failed "register-images: --initial-min-gain 1e6 leaves the frames as they are and says why"
+# A dataset's states share one frame: the alignment is applied only when it removes more than the
+# asked fraction of the boundary distance (1: never; 0: always).
+expect_ok "register-images: the alignment not applied below --initial-min-reduction" "$physreg" --no-report --log-level warn register-images --cycles 1 \
+  --cell-size 12 --baselines none --dataset "$ph" --initial-min-reduction 1 -o "$work/ri_min_gain"
+python3 - "$work/ri_min_gain/summary.json" <<'PY' && pass || failed "register-images: --initial-min-reduction 1 leaves the frames as they are and says why"
 import json, sys
 s = json.load(open(sys.argv[1]))
 a = s["initial_alignment"]
 assert not a["applied"] and "not applied" in a["decision"] and "initial_alignment" not in s["methods"], a
 PY
-expect_error "register-images: a NaN minimum gain" "--initial-min-gain nan" "$physreg" $ri --dataset "$ph" --initial-min-gain nan -o "$work/ri_bad_gain"
+expect_error "register-images: a minimum reduction above 1" "--initial-min-reduction 1.5" "$physreg" $ri --dataset "$ph" --initial-min-reduction 1.5 -o "$work/ri_bad_gain"
 expect_no_file "$work/ri_bad_gain"
 
 # physreg estimate / register-compression / evaluate on the small phantom (≈ 5 mm cells).

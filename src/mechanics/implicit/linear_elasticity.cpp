@@ -195,7 +195,7 @@ void LinearElasticModel::set_young_moduli(const std::vector<double>& young_modul
     for (auto d : m_diagonal_entry) values[d] += m_anchor;
     if (m_reuse_factor) { // the next solve factorises when the earlier factor no longer preconditions well
         m_factor_current = false;
-        m_pcg_s_since_change = 0.0;
+        m_pcg_iterations_since_change = 0;
         m_factorisation_s += seconds_since(t0);
         return;
     }
@@ -310,19 +310,22 @@ void LinearElasticModel::solve(const Eigen::VectorXd& f, Eigen::VectorXd& u) con
     double factorising_s = 0.0;
     if (m_reuse_factor && !m_factor_current) {
         // CG on a K solved several times (the load phase holds E) costs more, summed, than one
-        // factorisation: factorise once the CG time spent on this K exceeds the last factorisation's.
+        // factorisation: factorise once the CG iterations spent on this K pass a budget. Counted in
+        // iterations, not seconds, so that the result does not depend on the machine's speed or
+        // load (cli.determinism: the same bits on 1 and 2 threads). One iteration costs 1/35–1/16
+        // of a factorisation from 15 k to 38 k tetrahedra (bench_register_images).
+        constexpr int iterations_per_factorisation = 20;
         LinearSolveStats stats;
-        if (m_solver.has_factor() && m_pcg_s_since_change > m_last_factorisation_s) {
+        if (m_solver.has_factor() && m_pcg_iterations_since_change > iterations_per_factorisation) {
             stats = m_solver.factorise(m_k);
             m_solver.solve_factored(b, x);
         } else {
             stats = m_solver.solve(m_k, b, x);
-            m_pcg_s_since_change += stats.solve_s;
+            m_pcg_iterations_since_change += stats.iterations;
         }
         m_pcg_iterations += stats.iterations;
         if (stats.factorised) {
             m_factor_current = true;
-            m_last_factorisation_s = stats.factorisation_s;
             ++m_factorisations;
             m_factorisation_s += stats.factorisation_s;
             factorising_s = stats.factorisation_s;

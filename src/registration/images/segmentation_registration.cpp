@@ -365,6 +365,7 @@ void SegmentationRegistrationOptions::validate() const
     if (alternation_iterations < 1) fail("segmentation registration: alternation iterations {} must be ≥ 1", alternation_iterations);
     if (max_cycles < 1) fail("segmentation registration: max cycles {} must be ≥ 1", max_cycles);
     if (!(relative_tolerance >= 0.0) || !std::isfinite(relative_tolerance)) fail("segmentation registration: relative tolerance {} must be ≥ 0", relative_tolerance);
+    if (!(rms_tolerance_mm >= 0.0) || !std::isfinite(rms_tolerance_mm)) fail("segmentation registration: rms tolerance {} mm must be ≥ 0", rms_tolerance_mm);
     if (!(moduli_prior_factor == 0.0 || (moduli_prior_factor > 1.0 && std::isfinite(moduli_prior_factor))))
         fail("segmentation registration: moduli prior factor {} must be > 1 (one standard deviation of the log-normal prior), or 0 for none", moduli_prior_factor);
     if (!(moduli_prior_rms_mm > 0.0) || !std::isfinite(moduli_prior_rms_mm))
@@ -588,6 +589,11 @@ SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, con
                      fmt::format("cycle {}: rms distance {:.3f} mm", cycle, result.history.back().rms_distance_mm));
         if (before - (phi + prior) < options.relative_tolerance * before) {
             result.stop_reason = fmt::format("a cycle lowered the objective by less than {} of it", options.relative_tolerance);
+            break;
+        }
+        const auto& h = result.history;
+        if (options.rms_tolerance_mm > 0.0 && h[h.size() - 2].rms_distance_mm - h.back().rms_distance_mm < options.rms_tolerance_mm) {
+            result.stop_reason = fmt::format("a cycle lowered the rms distance by less than {} mm", options.rms_tolerance_mm);
             break;
         }
     }

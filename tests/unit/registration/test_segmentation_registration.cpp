@@ -110,6 +110,41 @@ TEST(LinearElasticity, CantileverSolveMatchesTheDirectProductAndSingularSystemsA
     EXPECT_EQ(model.reference_structures(), (std::vector<std::uint8_t>{1, 0}));
 }
 
+// Issue 30: solves by CG preconditioned by an earlier factor give the direct solution (to the CG
+// tolerance) without a factorisation per set of moduli; a K solved again and again is factorised.
+TEST(LinearElasticity, FactorReuseSolvesAsTheDirectSolverWithFewerFactorisations)
+{
+    const VolumeMesh mesh = mesh_of(cube_with_inclusion(), 4.0);
+    LinearElasticOptions o;
+    o.fixed_nodes = nodes_below(mesh, 5.0);
+    LinearElasticModel direct(mesh, o, "direct");
+    o.reuse_factor = true;
+    LinearElasticModel reuse(mesh, o, "reuse");
+    Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(mesh.node_count())), u_direct, u_reuse;
+    for (auto n : outer_boundary_nodes(mesh))
+        if (mesh.nodes[static_cast<std::size_t>(n)].z() > 26.0) f[3 * n] = 0.01;
+    int solves = 0;
+    for (const double inclusion : {30000.0, 33000.0, 36000.0, 20000.0}) { // the modulus phase's small steps
+        direct.set_young_moduli({3000.0, inclusion});
+        reuse.set_young_moduli({3000.0, inclusion});
+        direct.solve(f, u_direct);
+        reuse.solve(f, u_reuse);
+        ++solves;
+        EXPECT_LT((u_reuse - u_direct).norm(), 1e-8 * u_direct.norm()) << "inclusion " << inclusion << " Pa";
+    }
+    EXPECT_EQ(direct.factorisations(), solves);
+    EXPECT_LT(reuse.factorisations(), solves);
+    EXPECT_GT(reuse.pcg_iterations(), 0);
+    // The same K solved many times (the load phase): factorised once CG has cost more than a factorisation.
+    direct.set_young_moduli({3000.0, 21000.0});
+    reuse.set_young_moduli({3000.0, 21000.0});
+    direct.solve(f, u_direct);
+    const int before = reuse.factorisations();
+    for (int k = 0; k < 200; ++k) reuse.solve(f, u_reuse);
+    EXPECT_EQ(reuse.factorisations(), before + 1);
+    EXPECT_LT((u_reuse - u_direct).norm(), 1e-8 * u_direct.norm());
+}
+
 TEST(SignedDistanceMap, BallDistancesAndGradientsMatchTheAnalyticValues)
 {
     const LabelVolume ball = test::make_volume({40, 40, 40}, [](int i, int j, int k) -> std::uint16_t {
@@ -529,6 +564,29 @@ TEST_P(Alternation, FitsTheReferenceAndMovesTheModulusTowardTheTruth)
     EXPECT_LT(r.young_moduli_pa[1], 3000.0 * 12.0) << r.stop_reason << trajectory;
     // The reported boundary load is in equilibrium with the support: K u = F at the free nodes.
     EXPECT_GT(r.force_n.norm(), 0.0);
+}
+
+// The rms stop: a cycle that moves the boundary (rms distance) by less than the tolerance ends the
+// run, where the relative objective test would go on.
+TEST(SegmentationRegistration, RmsToleranceStopsWhenTheBoundaryNoLongerMoves)
+{
+    Problem p;
+    build_problem(p, 6.0);
+    SegmentationRegistrationOptions options;
+    options.max_cycles = 25;
+    options.relative_tolerance = 0.0; // never stops on the objective
+    const auto full = register_segmentation(p.mesh, p.options, *p.objective, p.force_nodes, {3000.0, 3000.0}, options);
+    options.rms_tolerance_mm = 0.005;
+    const auto early = register_segmentation(p.mesh, p.options, *p.objective, p.force_nodes, {3000.0, 3000.0}, options);
+    ASSERT_LT(early.history.size(), full.history.size());
+    EXPECT_NE(early.stop_reason.find("rms distance by less than 0.005 mm"), std::string::npos) << early.stop_reason;
+    const auto& h = early.history;
+    EXPECT_LT(h[h.size() - 2].rms_distance_mm - h.back().rms_distance_mm, 0.005);
+    for (std::size_t c = 1; c + 1 < h.size(); ++c) EXPECT_GE(h[c - 1].rms_distance_mm - h[c].rms_distance_mm, 0.005) << "cycle " << c;
+    EXPECT_LT(early.rms_distance_mm, 0.5); // below the voxel size already
+    SegmentationRegistrationOptions bad;
+    bad.rms_tolerance_mm = -1.0;
+    EXPECT_THROW(bad.validate(), Error);
 }
 
 // Issue 28's log-normal prior: the estimated modulus is pulled toward the table's value, the more

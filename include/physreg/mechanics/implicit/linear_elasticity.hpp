@@ -121,7 +121,7 @@ private:
     mutable double m_factorisation_s = 0.0;
     bool m_reuse_factor = false;
     mutable bool m_factor_current = false; ///< reuse_factor: the factor is of K as it stands (solve directly)
-    mutable double m_pcg_s_since_change = 0.0, m_last_factorisation_s = 0.0;
+    mutable int m_pcg_iterations_since_change = 0;
     mutable double m_solve_s = 0.0;
 };
 
