@@ -340,6 +340,7 @@ void add_subcommand_register_images_impl(CLI::App& app)
         reg.alternation_iterations = o->iterations;
         reg.max_cycles = o->cycles;
         reg.relative_tolerance = o->tolerance;
+        if (!(o->rms_tolerance >= 0.0) || !std::isfinite(o->rms_tolerance)) fail("--rms-tolerance {} mm must be ≥ 0 (0: off)", o->rms_tolerance);
         reg.rms_tolerance_mm = o->rms_tolerance;
         reg.estimate_moduli = !o->no_moduli;
         reg.moduli_prior_factor = o->moduli_prior;

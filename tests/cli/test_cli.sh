@@ -502,6 +502,8 @@ assert not a["applied"] and "not applied" in a["decision"] and "initial_alignmen
 PY
 expect_error "register-images: a minimum reduction above 1" "--initial-min-reduction 1.5" "$physreg" $ri --dataset "$ph" --initial-min-reduction 1.5 -o "$work/ri_bad_gain"
 expect_no_file "$work/ri_bad_gain"
+expect_error "register-images: a negative rms tolerance" "--rms-tolerance -1 mm must be ≥ 0" "$physreg" $ri --dataset "$ph" --rms-tolerance -1 -o "$work/ri_bad_rms"
+expect_no_file "$work/ri_bad_rms"
 
 # physreg estimate / register-compression / evaluate on the small phantom (≈ 5 mm cells).
 g="--grid 36x27x12"
