@@ -21,6 +21,7 @@
 #include "physreg/model/tissue_table.hpp"
 #include "physreg/field/displacement_sampling.hpp"
 #include "physreg/mesh/point_location.hpp"
+#include "physreg/registration/observation.hpp"
 #include "physreg/registration/surface/surface_model.hpp"
 #include "physreg/registration/surface/surface_registration.hpp"
 
@@ -31,6 +32,9 @@
 #include <pybind11/stl/filesystem.h>
 
 #include <cmath>
+#include <map>
+#include <set>
+#include <tuple>
 
 namespace py = pybind11;
 using namespace physreg;
@@ -132,6 +136,61 @@ LandmarkSet landmarks_from(const std::vector<std::string>& names, const py::arra
     LandmarkSet set(p.size());
     for (std::size_t n = 0; n < p.size(); ++n) set[n] = {names[n], p[n], LandmarkType::unspecified};
     return set;
+}
+
+/// A cloud from numpy: points (N, 3) float64 mm, optional int32 labels (N,) (default 0) and normals (N, 3).
+LabelledPointCloud cloud_from(const py::array& points, const std::optional<py::array>& labels, const std::optional<py::array>& normals)
+{
+    LabelledPointCloud cloud;
+    cloud.points = points_from(points, "points");
+    if (cloud.points.empty()) throw py::value_error("points: the cloud has no point");
+    if (labels) {
+        require_dtype(*labels, py::dtype::of<std::int32_t>(), "labels");
+        if (labels->ndim() != 1 || static_cast<std::size_t>(labels->shape(0)) != cloud.points.size())
+            throw py::value_error(fmt::format("labels: expected shape ({},)", cloud.points.size()));
+        const auto* l = static_cast<const std::int32_t*>(labels->cast<CArray<std::int32_t>>().data());
+        cloud.labels.assign(l, l + cloud.points.size());
+    } else {
+        cloud.labels.assign(cloud.points.size(), 0);
+    }
+    if (normals) {
+        cloud.normals = points_from(*normals, "normals");
+        if (cloud.normals.size() != cloud.points.size()) throw py::value_error(fmt::format("normals: {} rows for {} points", cloud.normals.size(), cloud.points.size()));
+    }
+    return cloud;
+}
+
+/// A progress(fraction, message) callback for the library, called with the GIL held; Ctrl-C stops it.
+std::function<void(double, const std::string&)> progress_from(const std::optional<py::function>& progress)
+{
+    if (!progress) return {};
+    py::function callback = *progress;
+    return [callback](double fraction, const std::string& message) {
+        py::gil_scoped_acquire acquire;
+        callback(fraction, message);
+        if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+    };
+}
+
+/// Tissues from {label: (young_modulus_pa, poisson_ratio)}; labels absent take paper 001's healthy liver (3.5 kPa, 0.45).
+TissueTable tissues_from(const VolumeMesh& mesh, const std::optional<std::map<std::int32_t, std::pair<double, double>>>& given)
+{
+    TissueTable table;
+    const std::set<std::int32_t> labels(mesh.cell_labels.begin(), mesh.cell_labels.end());
+    for (const auto label : labels) {
+        Tissue t;
+        t.label = label;
+        t.name = fmt::format("label {}", label);
+        t.young_modulus_pa = 3500.0;
+        t.poisson_ratio = 0.45;
+        if (given && given->count(label)) std::tie(t.young_modulus_pa, t.poisson_ratio) = given->at(label);
+        table.tissues.push_back(t);
+    }
+    if (given)
+        for (const auto& [label, value] : *given)
+            if (!labels.count(label)) throw py::value_error(fmt::format("tissues: label {} has no cell in the mesh", label));
+    table.validate("tissues");
+    return table;
 }
 
 py::dict stats_dict(const TreStats& s)
@@ -406,6 +465,10 @@ PYBIND11_MODULE(_physreg, m)
         .def_property_readonly("surface_labels", [](const SurfaceModel& model) {
             return py::array_t<std::int32_t>(static_cast<py::ssize_t>(model.surface.labels.size()), model.surface.labels.data());
         }, "(M,) int32 feature label per surface triangle.")
+        .def("to_model", [](const SurfaceModel& model, double young_modulus_pa, double poisson_ratio) {
+            return to_model(model, homogeneous_liver_tissues(young_modulus_pa, poisson_ratio));
+        }, py::arg("young_modulus_pa") = 3500.0, py::arg("poisson_ratio") = 0.45,
+           "The shared physreg.Model of this liver (its regions kept, the co-rotational law, no support), for physreg.register.")
         .def("__repr__", [](const SurfaceModel& model) {
             return fmt::format("SurfaceModel({} nodes, {} tetrahedra, {} surface triangles)", model.mesh.node_count(), model.mesh.cell_count(), model.surface.triangles.size());
         });
@@ -413,6 +476,29 @@ PYBIND11_MODULE(_physreg, m)
     struct SurfaceRegistration {
         VolumeMesh mesh;
         SurfaceRegistrationResult result;
+    };
+    // The dense field and the mapped points of any registration result (mesh at rest + nodal displacement).
+    const auto dense_field = [](const VolumeMesh& mesh, const std::vector<double>& u, std::optional<ImageGeometry> geometry, double spacing_mm) {
+        if (!(spacing_mm > 0) || !std::isfinite(spacing_mm)) throw py::value_error(fmt::format("spacing_mm: {} must be a positive number", spacing_mm));
+        const ImageGeometry g = geometry ? *geometry : image_grid_over_mesh(mesh, spacing_mm, 2 * spacing_mm);
+        DisplacementField f;
+        {
+            py::gil_scoped_release release;
+            f = sample_displacement_field(mesh, u, g).field;
+        }
+        const ImageGeometry fg = f.geometry;
+        return py::make_tuple(image_array(std::move(f), &DisplacementField::components, 3), fg);
+    };
+    const auto mapped_points = [](const VolumeMesh& mesh, const std::vector<double>& u, const py::array& points, double max_distance_mm) {
+        const std::vector<Vec3> p = points_from(points, "points");
+        LandmarkSet set(p.size());
+        for (std::size_t n = 0; n < p.size(); ++n) set[n] = {std::to_string(n + 1), p[n], LandmarkType::unspecified};
+        const auto where = embed_landmarks(mesh, set, max_distance_mm, "points");
+        const LandmarkSet moved = displace_landmarks(mesh, where, set, u);
+        py::array_t<double> out({static_cast<py::ssize_t>(moved.size()), py::ssize_t{3}});
+        for (std::size_t n = 0; n < moved.size(); ++n)
+            for (int a = 0; a < 3; ++a) out.mutable_at(static_cast<py::ssize_t>(n), a) = moved[n].position[a];
+        return out;
     };
     py::class_<SurfaceRegistration>(m, "SurfaceRegistration", "The result of register_surface_cloud: the model's nodal displacement and its dense field.")
         .def_property_readonly("displacement", [](py::object self) {
@@ -437,29 +523,13 @@ PYBIND11_MODULE(_physreg, m)
             }
             return out;
         }, "Per annealing plateau: steps, whether it settled, pairs kept, their mean distance (mm), stiffness per label (N).")
-        .def("field", [](const SurfaceRegistration& r, std::optional<ImageGeometry> geometry, double spacing_mm) {
-            if (!(spacing_mm > 0) || !std::isfinite(spacing_mm)) throw py::value_error(fmt::format("spacing_mm: {} must be a positive number", spacing_mm));
-            const ImageGeometry g = geometry ? *geometry : image_grid_over_mesh(r.mesh, spacing_mm, 2 * spacing_mm);
-            DisplacementField f;
-            {
-                py::gil_scoped_release release;
-                f = sample_displacement_field(r.mesh, r.result.displacement_mm, g).field;
-            }
-            const ImageGeometry fg = f.geometry;
-            return py::make_tuple(image_array(std::move(f), &DisplacementField::components, 3), fg);
+        .def("field", [dense_field](const SurfaceRegistration& r, std::optional<ImageGeometry> geometry, double spacing_mm) {
+            return dense_field(r.mesh, r.result.displacement_mm, geometry, spacing_mm);
         }, py::arg("geometry") = py::none(), py::arg("spacing_mm") = 2.0,
            "The dense field (float32 [z, y, x, 3], mm, LPS; 0 outside the model) on `geometry`, or on a grid of spacing_mm over the model "
            "with a 2-voxel margin (as register-surface writes displacement.nii.gz) → (array, ImageGeometry).")
-        .def("map_points", [](const SurfaceRegistration& r, const py::array& points, double max_distance_mm) {
-            const std::vector<Vec3> p = points_from(points, "points");
-            LandmarkSet set(p.size());
-            for (std::size_t n = 0; n < p.size(); ++n) set[n] = {std::to_string(n + 1), p[n], LandmarkType::unspecified};
-            const auto where = embed_landmarks(r.mesh, set, max_distance_mm, "points");
-            const LandmarkSet moved = displace_landmarks(r.mesh, where, set, r.result.displacement_mm);
-            py::array_t<double> out({static_cast<py::ssize_t>(moved.size()), py::ssize_t{3}});
-            for (std::size_t n = 0; n < moved.size(); ++n)
-                for (int a = 0; a < 3; ++a) out.mutable_at(static_cast<py::ssize_t>(n), a) = moved[n].position[a];
-            return out;
+        .def("map_points", [mapped_points](const SurfaceRegistration& r, const py::array& points, double max_distance_mm) {
+            return mapped_points(r.mesh, r.result.displacement_mm, points, max_distance_mm);
         }, py::arg("points"), py::arg("max_distance_mm") = 10.5,
            "Rest positions (N, 3) mm (targets, landmarks) carried by the model's displacement; a point farther than max_distance_mm "
            "from the model is an error.");
@@ -467,22 +537,7 @@ PYBIND11_MODULE(_physreg, m)
     m.def("register_surface_cloud", [](const SurfaceModel& model, const py::array& points, std::optional<py::array> labels, std::optional<py::array> normals,
                                        double young_modulus_pa, double poisson_ratio, double traction_ratio, const std::string& support,
                                        std::optional<std::vector<std::int32_t>> support_nodes, std::optional<py::function> progress) {
-        LabelledPointCloud cloud;
-        cloud.points = points_from(points, "points");
-        if (cloud.points.empty()) throw py::value_error("points: the cloud has no point");
-        if (labels) {
-            require_dtype(*labels, py::dtype::of<std::int32_t>(), "labels");
-            if (labels->ndim() != 1 || static_cast<std::size_t>(labels->shape(0)) != cloud.points.size())
-                throw py::value_error(fmt::format("labels: expected shape ({},)", cloud.points.size()));
-            const auto* l = static_cast<const std::int32_t*>(labels->cast<CArray<std::int32_t>>().data());
-            cloud.labels.assign(l, l + cloud.points.size());
-        } else {
-            cloud.labels.assign(cloud.points.size(), 0);
-        }
-        if (normals) {
-            cloud.normals = points_from(*normals, "normals");
-            if (cloud.normals.size() != cloud.points.size()) throw py::value_error(fmt::format("normals: {} rows for {} points", cloud.normals.size(), cloud.points.size()));
-        }
+        const LabelledPointCloud cloud = cloud_from(points, labels, normals);
         SurfaceCloudProblem problem;
         problem.young_modulus_pa = young_modulus_pa;
         problem.poisson_ratio = poisson_ratio;
@@ -490,15 +545,7 @@ PYBIND11_MODULE(_physreg, m)
         if (support != "posterior" && support != "none") throw py::value_error(fmt::format("support: '{}' is not one of 'posterior', 'none'", support));
         problem.posterior_support = support == "posterior";
         if (support_nodes) problem.support_nodes = *support_nodes;
-        std::function<void(double, const std::string&)> report;
-        if (progress) {
-            py::function callback = *progress;
-            report = [callback](double fraction, const std::string& message) {
-                py::gil_scoped_acquire acquire;
-                callback(fraction, message);
-                if (PyErr_CheckSignals() != 0) throw py::error_already_set();
-            };
-        }
+        const auto report = progress_from(progress);
         SurfaceRegistration out{model.mesh, {}};
         {
             py::gil_scoped_release release;
@@ -512,6 +559,141 @@ PYBIND11_MODULE(_physreg, m)
           "labels (N,) (default: all 0, surface) and outward normals (N, 3) — with register-surface's defaults (co-rotational tetrahedra, "
           "backward Euler, arctan pair forces annealed over paper 001's schedules, the posterior surface held). progress(fraction, "
           "message) after every plateau. Returns a SurfaceRegistration.");
+
+    // ---- one model for the three modes (issue 29): Model, observations, register --------------------
+    py::class_<Model>(m, "Model",
+                      "One model for the three registration modes: a mesh (tetrahedra or hexahedra), a tissue per cell label (Young's "
+                      "modulus Pa, Poisson ratio), the law, supports, and the surface a cloud is matched to. A tool (physreg.Tool) drives "
+                      "it with paper 000's TLED solver (grid hexahedra only), a cloud (physreg.Cloud) with paper 001's co-rotational "
+                      "backward Euler, a segmentation (physreg.Segmentation) with paper 002's linear elasticity and adjoint L-BFGS.")
+        .def_static("from_mesh", [](const VolumeMesh& mesh, std::optional<std::map<std::int32_t, std::pair<double, double>>> tissues, const std::string& law,
+                                    std::optional<std::vector<std::int32_t>> surface_labels) {
+            Model model;
+            model.mesh = mesh;
+            model.tissues = tissues_from(mesh, tissues);
+            model.law = parse_material_law(law);
+            const std::set<std::int32_t> keep = surface_labels ? std::set<std::int32_t>(surface_labels->begin(), surface_labels->end()) : std::set<std::int32_t>{};
+            model.surface = cell_group_boundary(mesh, [&](std::int32_t l) { return keep.empty() || keep.count(l) > 0; }, "surface_labels");
+            model.validate("mesh");
+            return model;
+        }, py::arg("mesh"), py::arg("tissues") = py::none(), py::arg("law") = "neo-hookean", py::arg("surface_labels") = py::none(),
+           "A model of `mesh` (physreg.mesh_from_labels, read_mesh): tissues {label: (young_modulus_pa, poisson_ratio)} (labels left out: "
+           "3.5 kPa, 0.45), the law (neo-hookean, corotational, svk, linear, mooney-rivlin), and its surface: the boundary of the cells "
+           "of surface_labels (default: the whole outer boundary), every region 0.")
+        .def("hold", [](Model& model, const std::vector<std::int32_t>& nodes, const std::string& directions, const std::string& name) {
+            std::array<bool, 3> dofs{false, false, false};
+            for (const char c : directions) {
+                if (c < 'x' || c > 'z') throw py::value_error(fmt::format("directions: '{}' is not made of x, y, z", directions));
+                dofs[static_cast<std::size_t>(c - 'x')] = true;
+            }
+            if (directions.empty()) throw py::value_error("directions: empty");
+            Model changed = model;
+            changed.supports.push_back({name, nodes, dofs, Vec3::Zero()});
+            changed.validate("hold");
+            model = std::move(changed);
+        }, py::arg("nodes"), py::arg("directions") = "xyz", py::arg("name") = "support",
+           "Holds `nodes` (ids) in the given directions (e.g. 'xyz', or 'y' for a table under the model).")
+        .def("surface_nodes_facing", [](const Model& model, std::array<double, 3> direction, double cosine) {
+            const Vec3 d(direction[0], direction[1], direction[2]);
+            if (!(d.norm() > 0) || !d.allFinite()) throw py::value_error("direction: must be a non-zero finite vector");
+            return surface_nodes_facing(model.mesh, model.surface, d.normalized(), cosine);
+        }, py::arg("direction"), py::arg("cosine") = 0.5,
+           "Surface nodes whose outward normal points along `direction` (cosine above `cosine`): e.g. (0, 1, 0), the posterior side, to hold.")
+        .def_property_readonly("mesh", [](const Model& model) { return model.mesh; }, "The mesh (a copy).")
+        .def_property_readonly("law", [](const Model& model) { return to_string(model.law); })
+        .def_property_readonly("tissues", [](const Model& model) {
+            py::dict d;
+            for (const auto& t : model.tissues.tissues) d[py::int_(t.label)] = py::make_tuple(t.young_modulus_pa, t.poisson_ratio);
+            return d;
+        }, "{label: (young_modulus_pa, poisson_ratio)}")
+        .def_property_readonly("supports", [](const Model& model) {
+            py::list out;
+            for (const auto& c : model.supports) {
+                std::string directions;
+                for (int a = 0; a < 3; ++a)
+                    if (c.dofs[static_cast<std::size_t>(a)]) directions += static_cast<char>('x' + a);
+                out.append(py::make_tuple(c.name, py::array_t<std::int32_t>(static_cast<py::ssize_t>(c.nodes.size()), c.nodes.data()), directions));
+            }
+            return out;
+        }, "[(name, node ids, directions held)]")
+        .def_property_readonly("surface_triangles", [](const Model& model) {
+            py::array_t<std::int32_t> t({static_cast<py::ssize_t>(model.surface.triangles.size()), py::ssize_t{3}});
+            for (std::size_t r = 0; r < model.surface.triangles.size(); ++r)
+                for (int c = 0; c < 3; ++c) t.mutable_at(static_cast<py::ssize_t>(r), c) = model.surface.triangles[r][static_cast<std::size_t>(c)];
+            return t;
+        }, "(M, 3) int32 node ids of the surface's triangles.")
+        .def_property_readonly("surface_labels", [](const Model& model) {
+            return py::array_t<std::int32_t>(static_cast<py::ssize_t>(model.surface.labels.size()), model.surface.labels.data());
+        }, "(M,) int32 region per surface triangle (0 surface, 1 umbilical notch, 2 anterior margin).")
+        .def("__repr__", [](const Model& model) {
+            return fmt::format("Model({} nodes, {} {}, {} tissues, law {}, {} supports, {} surface triangles)", model.mesh.node_count(), model.mesh.cell_count(),
+                               model.mesh.cell_type == CellType::hexahedron ? "hexahedra" : "tetrahedra", model.tissues.tissues.size(), to_string(model.law),
+                               model.supports.size(), model.surface.triangles.size());
+        });
+
+    py::class_<ToolObservation>(m, "Tool", "A tracked tool's poses: the path of its reference point (sphere centre, box centre) from first contact to its last pose.")
+        .def(py::init([](const py::array& path, double radius_mm, const std::string& shape) {
+                 ToolObservation o;
+                 o.tool.name = "tool";
+                 o.tool.path = points_from(path, "path");
+                 if (o.tool.path.size() < 2) throw py::value_error("path: needs at least 2 poses (first contact, last)");
+                 o.tool.shape = parse_indenter_shape(shape);
+                 if (o.tool.shape != IndenterShape::sphere) throw py::value_error(fmt::format("shape: '{}': only 'sphere' is taken from Python yet", shape));
+                 if (!(radius_mm > 0) || !std::isfinite(radius_mm)) throw py::value_error(fmt::format("radius_mm: {} must be a positive number", radius_mm));
+                 o.tool.radius_mm = radius_mm;
+                 return o;
+             }), py::arg("path"), py::arg("radius_mm"), py::arg("shape") = "sphere");
+    py::class_<CloudObservation>(m, "Cloud", "A surface seen during the operation: points (N, 3) mm LPS, optional int32 region labels (N,), outward normals (N, 3).")
+        .def(py::init([](const py::array& points, std::optional<py::array> labels, std::optional<py::array> normals) {
+                 return CloudObservation{cloud_from(points, labels, normals)};
+             }), py::arg("points"), py::arg("labels") = py::none(), py::arg("normals") = py::none());
+    py::class_<SegmentationObservation>(m, "Segmentation", "A new segmentation: a uint16 label array [z, y, x] and its geometry, labels as the model's cells.")
+        .def(py::init([](const py::array& labels, const ImageGeometry& geometry) { return SegmentationObservation{label_volume_from(labels, geometry)}; }),
+             py::arg("labels"), py::arg("geometry"));
+
+    struct Registration {
+        VolumeMesh mesh;
+        ModelRegistration result;
+    };
+    py::class_<Registration>(m, "Registration", "The result of physreg.register: the mode and solver used, the nodal displacement and its dense field.")
+        .def_property_readonly("mode", [](const Registration& r) { return r.result.mode; }, "compression, surface or images")
+        .def_property_readonly("solver", [](const Registration& r) { return r.result.solver; })
+        .def_property_readonly("seconds", [](const Registration& r) { return r.result.seconds; })
+        .def_property_readonly("notes", [](const Registration& r) { return r.result.notes; }, "What the mode decided on the way (a segmentation: the rigid pre-fit)")
+        .def_property_readonly("displacement", [](py::object self) {
+            auto& u = self.cast<Registration&>().result.displacement_mm;
+            return py::array_t<double>({static_cast<py::ssize_t>(u.size() / 3), py::ssize_t{3}}, u.data(), self);
+        }, "(N, 3) float64 nodal displacement, mm (a view)")
+        .def_property_readonly("mesh", [](const Registration& r) { return r.mesh; }, "The model's mesh at rest (a copy).")
+        .def("field", [dense_field](const Registration& r, std::optional<ImageGeometry> geometry, double spacing_mm) {
+            return dense_field(r.mesh, r.result.displacement_mm, geometry, spacing_mm);
+        }, py::arg("geometry") = py::none(), py::arg("spacing_mm") = 2.0,
+           "The dense field (float32 [z, y, x, 3], mm, LPS; 0 outside the model) on `geometry`, or on a grid of spacing_mm over the model → (array, ImageGeometry).")
+        .def("map_points", [mapped_points](const Registration& r, const py::array& points, double max_distance_mm) {
+            return mapped_points(r.mesh, r.result.displacement_mm, points, max_distance_mm);
+        }, py::arg("points"), py::arg("max_distance_mm") = 10.5, "Rest positions (N, 3) mm (landmarks, targets) carried by the displacement.");
+
+    m.def("register", [](const Model& model, const py::object& observation, double traction_ratio, double young_modulus_pa, int max_cycles,
+                         std::optional<py::function> progress) {
+        Observation seen;
+        if (py::isinstance<ToolObservation>(observation)) seen = observation.cast<ToolObservation>();
+        else if (py::isinstance<CloudObservation>(observation)) seen = observation.cast<CloudObservation>();
+        else if (py::isinstance<SegmentationObservation>(observation)) seen = observation.cast<SegmentationObservation>();
+        else throw py::type_error("observation: expected a physreg.Tool, physreg.Cloud or physreg.Segmentation");
+        ModelRegistrationSettings settings;
+        settings.cloud.traction_ratio = traction_ratio;
+        settings.cloud.young_modulus_pa = young_modulus_pa;
+        settings.segmentation.max_cycles = max_cycles;
+        const auto report = progress_from(progress);
+        Registration out{model.mesh, {}};
+        py::gil_scoped_release release;
+        out.result = register_model(model, seen, settings, report);
+        return out;
+    }, py::arg("model"), py::arg("observation"), py::arg("traction_ratio") = 0.5, py::arg("young_modulus_pa") = 0.0, py::arg("max_cycles") = 40,
+          py::arg("progress") = py::none(),
+          "Registers `model` to what was seen, with the solver that observation needs: a Tool → equilibrium under the tool (paper 000, "
+          "TLED); a Cloud → paper 001's annealed pair forces (traction_ratio × E, E = young_modulus_pa or the surface's softest tissue); "
+          "a Segmentation → paper 002's boundary-driven linear elasticity (max_cycles alternations). Returns a Registration.");
 
     m.def("run", [](const std::vector<std::string>& args, std::optional<py::function> progress) {
         struct Restore {

@@ -11,8 +11,13 @@ Building blocks (C++ core, arrays without copies where the layout allows):
     tre, hausdorff
 
 In memory (numpy arrays in, result objects out; no files):
+    Model (from_mesh; SurfaceModel.to_model) — one model for the three modes — and what is seen:
+    Tool (poses), Cloud (points, labels, normals), Segmentation (label array + geometry);
+    register(model, observation) → Registration (.mode, .displacement, .field(), .map_points())
+    picks the solver: TLED for a tool (paper 000), co-rotational backward Euler for a cloud
+    (paper 001), linear elasticity with adjoint L-BFGS for a segmentation (paper 002).
     SurfaceModel (from_labels, from_mesh), register_surface_cloud → SurfaceRegistration
-    (.displacement, .field(), .map_points(), .plateaus)
+    (.displacement, .field(), .map_points(), .plateaus): paper 001 with register-surface's defaults.
 
 The commands of the `physreg` program, run in this process with the same checks and messages,
 each returning the summary it wrote (a dict):
@@ -29,12 +34,17 @@ from pathlib import Path as _Path
 _os.environ.setdefault("PHYSREG_PYTHONPATH", str(_Path(__file__).resolve().parent.parent))
 
 from ._physreg import (  # noqa: F401,E402
+    Cloud,
     Error,
     ImageGeometry,
     Mesh,
+    Model,
+    Registration,
+    Segmentation,
     Surface,
     SurfaceModel,
     SurfaceRegistration,
+    Tool,
     __version__,
     boundary_surface,
     hausdorff,
@@ -45,6 +55,7 @@ from ._physreg import (  # noqa: F401,E402
     read_landmarks,
     read_mesh,
     read_surface,
+    register,
     register_surface_cloud,
     tre,
     write_displacement_field,

@@ -79,3 +79,53 @@ def test_bad_arrays_are_refused_with_the_argument_named(model_and_cloud):
         labels = np.zeros((6, 6, 6), dtype=np.uint16)
         labels[1:5, 1:5, 1:5] = 1
         physreg.SurfaceModel.from_mesh(physreg.mesh_from_labels(labels, physreg.ImageGeometry((0, 0, 0), (2, 2, 2), None)))
+
+
+# ---- one model for the three modes (issue 29 item 2): physreg.Model, observations, physreg.register ----
+
+def test_the_shared_model_with_a_cloud_is_register_surface_cloud(model_and_cloud):
+    model, cloud, _ = model_and_cloud
+    shared = model.to_model()
+    assert shared.law == "corotational" and shared.supports == []
+    shared.hold(shared.surface_nodes_facing((0.0, 1.0, 0.0)))  # register_surface_cloud's default support
+    result = physreg.register(shared, physreg.Cloud(cloud))
+    assert result.mode == "surface"
+    same = physreg.register_surface_cloud(model, cloud)
+    assert np.array_equal(result.displacement, same.displacement)
+
+
+def test_a_segmentation_held_in_memory_moves_the_model_by_its_shift(model_and_cloud, dataset):
+    model, _, _ = model_and_cloud
+    labels, geometry = physreg.read_labels(dataset / "rest" / "labels.nii.gz")
+    liver = np.isin(labels, [2, 3, 4]).astype(np.uint16)
+    moved = np.ascontiguousarray(np.roll(liver, 2, axis=2))  # two voxels along the image's first axis
+    shift = 2.0 * geometry.spacing[0] * np.asarray(geometry.direction)[:, 0]
+    result = physreg.register(model.to_model(), physreg.Segmentation(moved, geometry), max_cycles=10)
+    assert result.mode == "images" and "adjoint" in result.solver
+    mean = result.displacement.mean(axis=0)
+    assert np.linalg.norm(mean - shift) < 0.25 * np.linalg.norm(shift), (mean, shift)
+    field, field_geometry = result.field(spacing_mm=4.0)
+    assert field.shape[-1] == 3 and np.isfinite(field).all()
+
+
+def test_a_tool_drives_a_hexahedral_model_and_refuses_tetrahedra(model_and_cloud, dataset):
+    labels, geometry = physreg.read_labels(dataset / "rest" / "labels.nii.gz")
+    liver = np.isin(labels, [2, 3, 4]).astype(np.uint16)
+    hexahedra = physreg.mesh_from_labels(liver, geometry, kind="hex", grid=(12, 9, 6))
+    model = physreg.Model.from_mesh(hexahedra, tissues={1: (3500.0, 0.45)})
+    model.hold(model.surface_nodes_facing((0.0, 1.0, 0.0)))
+    nodes = hexahedra.nodes
+    front = nodes[np.argmin(nodes[:, 1])]
+    radius = 10.0
+    start = front - np.array([0.0, radius, 0.0])
+    tool = physreg.Tool(np.array([start, start + [0.0, 6.0, 0.0]]), radius_mm=radius)
+    result = physreg.register(model, tool)
+    assert result.mode == "compression"
+    assert 3.0 < np.linalg.norm(result.displacement, axis=1).max() < 7.0
+    tetrahedra = model_and_cloud[0].to_model()
+    with pytest.raises(physreg.Error, match="grid of hexahedra"):
+        physreg.register(tetrahedra, tool)
+    with pytest.raises(TypeError, match="physreg.Tool, physreg.Cloud or physreg.Segmentation"):
+        physreg.register(tetrahedra, "a cloud")
+    with pytest.raises(ValueError, match="directions"):
+        model.hold([0], directions="w")

@@ -569,4 +569,55 @@ CompressionTracker::Update CompressionTracker::move_to(const Vec3& position, con
     return {s.iterations, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()};
 }
 
+Model to_model(const LiverModel& model, const std::set<std::int32_t>& surface_labels)
+{
+    Model out;
+    out.mesh = model.mesh;
+    out.tissues = model.tissues;
+    out.law = model.tled ? model.tled->options().law : MaterialLaw::neo_hookean;
+    out.supports = model.supports();
+    out.surface = cell_group_boundary(
+        model.mesh, [&](std::int32_t label) { return surface_labels.empty() || surface_labels.count(label) > 0; }, "compression model surface");
+    if (!model.coupling.empty()) out.coupling = std::make_shared<const PenaltyCoupling>(model.coupling);
+    return out;
+}
+
+LiverModel compression_model(const Model& model, const std::string& what)
+{
+    model.validate(what);
+    if (model.mesh.cell_type != CellType::hexahedron || !model.mesh.grid)
+        fail("{}: a tool drives models on a grid of hexahedra (paper 000's TLED model); this one holds {} without a grid", what,
+             to_string(model.mesh.cell_type));
+    if (!model.structures.empty())
+        fail("{}: {} auxiliary structure(s) (membrane, beams): the explicit TLED solver has none; drive this model with a cloud instead", what,
+             model.structures.size());
+    LiverModel out;
+    out.mesh = model.mesh;
+    out.tissues = model.tissues;
+    out.cell_size_mm = model.mesh.grid->cell_size;
+    out.fingerprint = mesh_fingerprint(model.mesh);
+    out.original_vertex.resize(model.mesh.node_count());
+    std::iota(out.original_vertex.begin(), out.original_vertex.end(), 0);
+    out.fixed_nodes = model.held_nodes();
+    for (const auto& s : model.partial_supports()) {
+        if (s.dofs != std::array<bool, 3>{false, true, false})
+            fail("{}: support '{}' holds directions ({}, {}, {}); the compression mode takes whole nodes or a table's y", what, s.name, s.dofs[0], s.dofs[1],
+                 s.dofs[2]);
+        out.table_nodes.insert(out.table_nodes.end(), s.nodes.begin(), s.nodes.end());
+    }
+    std::sort(out.table_nodes.begin(), out.table_nodes.end());
+    out.table_nodes.erase(std::unique(out.table_nodes.begin(), out.table_nodes.end()), out.table_nodes.end());
+    out.parameters.region = out.table_nodes.empty() ? ModelRegion::liver : ModelRegion::body;
+    out.parameters.variant = model.coupling ? ModelVariant::coupled : ModelVariant::shared_nodes;
+    out.parameters.grid = model.mesh.grid->dims;
+    if (model.coupling) {
+        out.coupling = *model.coupling;
+        out.parameters.coupling = model.coupling->stiffness();
+    }
+    TledOptions tled;
+    tled.law = model.law;
+    out.tled = std::make_unique<TledModel>(out.mesh, out.tissues, tled);
+    return out;
+}
+
 } // namespace physreg

@@ -91,12 +91,15 @@ struct Fit {
     int iterations = 0;
 };
 
-double rms_distance(const std::vector<std::unique_ptr<SignedDistanceMap>>& maps, const StructurePoints& moving, const Mat3& r, const Vec3& t)
+using Maps = std::vector<const SignedDistanceMap*>;
+using Boundaries = std::vector<std::vector<Vec3>>;
+
+double rms_distance(const Maps& maps, const Boundaries& moving, const Mat3& r, const Vec3& t)
 {
     double sum = 0.0;
     std::size_t n = 0;
     for (std::size_t s = 0; s < maps.size(); ++s)
-        for (const auto& x : moving.boundary[s]) {
+        for (const auto& x : moving[s]) {
             const double phi = maps[s]->value(r * x + t);
             sum += phi * phi;
             ++n;
@@ -104,7 +107,7 @@ double rms_distance(const std::vector<std::unique_ptr<SignedDistanceMap>>& maps,
     return std::sqrt(sum / static_cast<double>(std::max<std::size_t>(1, n)));
 }
 
-Fit refine(const std::vector<std::unique_ptr<SignedDistanceMap>>& maps, const StructurePoints& moving, Mat3 r, Vec3 t)
+Fit refine(const Maps& maps, const Boundaries& moving, Mat3 r, Vec3 t)
 {
     Fit f{r, t, rms_distance(maps, moving, r, t), 0};
     double lambda = 1e-3;
@@ -114,10 +117,10 @@ Fit refine(const std::vector<std::unique_ptr<SignedDistanceMap>>& maps, const St
         Vec3 centre = Vec3::Zero();
         std::size_t count = 0;
         for (std::size_t s = 0; s < maps.size(); ++s)
-            for (const auto& x : moving.boundary[s]) centre += f.rotation * x + f.translation, ++count;
+            for (const auto& x : moving[s]) centre += f.rotation * x + f.translation, ++count;
         centre /= static_cast<double>(count);
         for (std::size_t s = 0; s < maps.size(); ++s)
-            for (const auto& x : moving.boundary[s]) {
+            for (const auto& x : moving[s]) {
                 const Vec3 y = f.rotation * x + f.translation;
                 Vec3 g;
                 const double phi = maps[s]->value_and_gradient(y, g);
@@ -164,10 +167,13 @@ SegmentationAlignment align_segmentations(const LabelVolume& fixed, const LabelV
     const detail::PrincipalFrame ff = detail::principal_frame(f.all), fm = detail::principal_frame(m.all);
     const Vec3 cf = ff.centre, cm = fm.centre;
     out.centroid_distance_mm = (cf - cm).norm();
-    std::vector<std::unique_ptr<SignedDistanceMap>> maps;
-    for (const auto label : structures)
-        maps.push_back(std::make_unique<SignedDistanceMap>(fixed, std::set<std::int32_t>{label}, "fixed structure " + std::to_string(label)));
-    out.rms_boundary_distance_before_mm = rms_distance(maps, m, Mat3::Identity(), Vec3::Zero());
+    std::vector<std::unique_ptr<SignedDistanceMap>> owned;
+    Maps maps;
+    for (const auto label : structures) {
+        owned.push_back(std::make_unique<SignedDistanceMap>(fixed, std::set<std::int32_t>{label}, "fixed structure " + std::to_string(label)));
+        maps.push_back(owned.back().get());
+    }
+    out.rms_boundary_distance_before_mm = rms_distance(maps, m.boundary, Mat3::Identity(), Vec3::Zero());
     if (mode == InitialAlignment::identity) {
         out.rms_boundary_distance_mm = out.rms_boundary_distance_before_mm;
         out.start = "identity";
@@ -182,7 +188,7 @@ SegmentationAlignment align_segmentations(const LabelVolume& fixed, const LabelV
             starts.push_back({"principal axes " + std::to_string(signs), ff.axes * detail::axis_flip(signs) * fm.axes.transpose()});
         Fit best{Mat3::Identity(), Vec3::Zero(), std::numeric_limits<double>::infinity(), 0};
         for (const auto& [name, r0] : starts) {
-            const Fit fit = refine(maps, m, r0, cf - r0 * cm);
+            const Fit fit = refine(maps, m.boundary, r0, cf - r0 * cm);
             logger()->debug("initial alignment: start {}: RMS boundary distance {:.3f} mm after {} iterations", name, fit.rms, fit.iterations);
             // The centroid start wins ties: a symmetric shape's axes are a guess, its centroid is not.
             if (!std::isfinite(best.rms) || fit.rms < 0.95 * best.rms) {
@@ -195,7 +201,28 @@ SegmentationAlignment align_segmentations(const LabelVolume& fixed, const LabelV
         out.iterations = best.iterations;
     }
     out.rotation_deg = Eigen::AngleAxisd(out.rotation).angle() * 180.0 / M_PI;
-    out.rms_boundary_distance_mm = rms_distance(maps, m, out.rotation, out.translation);
+    out.rms_boundary_distance_mm = rms_distance(maps, m.boundary, out.rotation, out.translation);
+    return out;
+}
+
+SegmentationAlignment align_points_to_maps(const std::vector<const SignedDistanceMap*>& maps, const std::vector<std::vector<Vec3>>& points)
+{
+    if (maps.size() != points.size()) fail("rigid fit: {} maps for {} point sets", maps.size(), points.size());
+    Maps used;
+    Boundaries moving;
+    for (std::size_t s = 0; s < maps.size(); ++s)
+        if (maps[s] && !points[s].empty()) used.push_back(maps[s]), moving.push_back(points[s]);
+    if (used.empty()) fail("rigid fit: no structure has both a map and points");
+    SegmentationAlignment out;
+    out.mode = InitialAlignment::rigid;
+    out.start = "identity";
+    out.rms_boundary_distance_before_mm = rms_distance(used, moving, Mat3::Identity(), Vec3::Zero());
+    const Fit fit = refine(used, moving, Mat3::Identity(), Vec3::Zero());
+    out.rotation = fit.rotation;
+    out.translation = fit.translation;
+    out.iterations = fit.iterations;
+    out.rotation_deg = Eigen::AngleAxisd(out.rotation).angle() * 180.0 / M_PI;
+    out.rms_boundary_distance_mm = fit.rms;
     return out;
 }
 

@@ -5,6 +5,10 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 
+#include "physreg/mesh/tet_split.hpp"
+#include "physreg/registration/images/segmentation_alignment.hpp"
+
+#include <fmt/format.h>
 #include <lbfgs.h>
 
 #include <algorithm>
@@ -12,6 +16,8 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <memory>
+#include <set>
 
 namespace physreg {
 namespace {
@@ -370,6 +376,8 @@ void SegmentationRegistrationOptions::validate() const
         fail("segmentation registration: moduli prior factor {} must be > 1 (one standard deviation of the log-normal prior), or 0 for none", moduli_prior_factor);
     if (!(moduli_prior_rms_mm > 0.0) || !std::isfinite(moduli_prior_rms_mm))
         fail("segmentation registration: moduli prior weight {} mm (the rms distance one standard deviation costs) must be positive", moduli_prior_rms_mm);
+    if (!(rigid_min_reduction >= 0.0) || !std::isfinite(rigid_min_reduction))
+        fail("segmentation registration: rigid pre-fit threshold {} must be ≥ 0 (a fraction of the rms distance; ≥ 1: never)", rigid_min_reduction);
 }
 
 BoundaryParametrisation parse_boundary_parametrisation(const std::string& text)
@@ -643,6 +651,77 @@ SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, con
     result.factorisation_s = model.factorisation_seconds();
     result.solve_s = model.solve_seconds();
     result.seconds = seconds_since(t0);
+    return result;
+}
+
+SegmentationRegistrationResult register_segmentation(const Model& model, const LabelVolume& fixed_labels, const SegmentationRegistrationOptions& options,
+                                                     const std::function<void(double, const std::string&)>& progress)
+{
+    const std::string what = "segmentation registration";
+    options.validate();
+    model.validate(what + ": the model");
+    if (model.coupling)
+        fail("{}: the model's tissues are coupled by penalty over split interfaces; paper 002's linear model joins them by shared nodes "
+             "(build the model with shared nodes)", what);
+    if (!model.structures.empty())
+        fail("{}: the model has {} auxiliary structure(s) (membrane, beams), which paper 002's linear model does not hold", what, model.structures.size());
+    if (const auto partial = model.partial_supports(); !partial.empty())
+        fail("{}: support '{}' holds only some directions; paper 002's linear model holds whole nodes", what, partial.front().name);
+    VolumeMesh mesh = model.mesh.cell_type == CellType::hexahedron ? split_hexahedra_into_tetrahedra(model.mesh) : model.mesh;
+    const std::set<std::int32_t> present(mesh.cell_labels.begin(), mesh.cell_labels.end());
+    const std::set<std::int32_t> observed(fixed_labels.labels.begin(), fixed_labels.labels.end());
+    const std::vector<std::int32_t> labels(present.begin(), present.end());
+    LinearElasticOptions elastic;
+    elastic.fixed_nodes = model.held_nodes();
+    elastic.reuse_factor = options.reuse_factor;
+    std::vector<std::unique_ptr<SignedDistanceMap>> maps;
+    std::vector<const SignedDistanceMap*> map_of;
+    std::vector<double> initial;
+    for (const auto label : labels) {
+        const Tissue* t = model.tissues.find(label);
+        elastic.poisson_ratio[label] = t->poisson_ratio;
+        initial.push_back(t->young_modulus_pa);
+        maps.push_back(observed.count(label) ? std::make_unique<SignedDistanceMap>(fixed_labels, std::set<std::int32_t>{label},
+                                                                                   fmt::format("fixed label {}", label))
+                                             : nullptr);
+        map_of.push_back(maps.back().get());
+    }
+    if (std::all_of(map_of.begin(), map_of.end(), [](const SignedDistanceMap* m) { return m == nullptr; }))
+        fail("{}: none of the model's labels ({}) is in the fixed segmentation", what, fmt::join(labels, ","));
+    // A free model slides rigidly first (what the segmentation's normal distances cannot tell the
+    // elastic registration); a held one cannot move rigidly at all.
+    Mat3 rotation = Mat3::Identity();
+    Vec3 translation = Vec3::Zero();
+    std::string prefit = elastic.fixed_nodes.empty() ? "not tried (rigid_min_reduction ≥ 1)" : "not tried: the model is held (supports)";
+    if (elastic.fixed_nodes.empty() && options.rigid_min_reduction < 1.0) {
+        const SegmentationObjective rest_terms(mesh, labels, map_of, "the fixed segmentation");
+        std::vector<std::vector<Vec3>> points(labels.size());
+        for (std::size_t j = 0; j < labels.size(); ++j)
+            for (const auto n : rest_terms.structure_term_nodes(j)) points[j].push_back(mesh.nodes[static_cast<std::size_t>(n)]);
+        const SegmentationAlignment fit = align_points_to_maps(map_of, points);
+        const double before = fit.rms_boundary_distance_before_mm, after = fit.rms_boundary_distance_mm;
+        const bool apply = before - after > options.rigid_min_reduction * before;
+        prefit = fmt::format("{}: {:.1f}° and {:.2f} mm move the boundary's rms distance {:.3f} → {:.3f} mm ({:.0f} % removed, {:.0f} % needed)",
+                             apply ? "applied" : "not applied", fit.rotation_deg, fit.translation.norm(), before, after,
+                             100 * (before - after) / std::max(before, 1e-12), 100 * options.rigid_min_reduction);
+        if (apply) {
+            rotation = fit.rotation;
+            translation = fit.translation;
+            for (auto& x : mesh.nodes) x = rotation * x + translation;
+        }
+    }
+    const SegmentationObjective objective(mesh, labels, map_of, "the fixed segmentation");
+    std::vector<std::int32_t> force_nodes;
+    for (const auto n : outer_boundary_nodes(mesh))
+        if (!std::binary_search(elastic.fixed_nodes.begin(), elastic.fixed_nodes.end(), n)) force_nodes.push_back(n);
+    if (force_nodes.empty()) fail("{}: the supports hold every node of the outer boundary; nothing is left to load", what);
+    SegmentationRegistrationResult result = register_segmentation(mesh, elastic, objective, force_nodes, initial, options, progress);
+    for (std::size_t i = 0; i < model.mesh.node_count(); ++i) {
+        const Vec3& x = model.mesh.nodes[i];
+        const Vec3 rigid = rotation * x + translation - x;
+        for (int c = 0; c < 3; ++c) result.displacement_mm[static_cast<Eigen::Index>(3 * i + static_cast<std::size_t>(c))] += rigid[c];
+    }
+    result.rigid_prefit = prefit;
     return result;
 }
 

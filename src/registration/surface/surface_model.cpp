@@ -228,4 +228,16 @@ TissueTable homogeneous_liver_tissues(double young_modulus_pa, double poisson_ra
     return table;
 }
 
+Model to_model(const SurfaceModel& model, const TissueTable& tissues, std::vector<NodeConstraint> supports)
+{
+    Model out;
+    out.mesh = model.mesh;
+    out.tissues = tissues;
+    out.law = MaterialLaw::corotational;
+    out.surface = model.surface;
+    out.supports = std::move(supports);
+    out.validate("surface model");
+    return out;
+}
+
 } // namespace physreg

@@ -59,6 +59,9 @@ void SurfaceRegistrationOptions::validate() const
         fail("surface registration: support stiffness {} N/mm must be ≥ 0 (0: held)", support_stiffness_n_per_mm);
     for (const auto node : fixed_nodes)
         if (node < 0) fail("surface registration: support node {} is not a node id", node);
+    for (const auto& s : partial_supports)
+        for (const auto node : s.nodes)
+            if (node < 0) fail("surface registration: support '{}' node {} is not a node id", s.name, node);
 }
 
 std::map<std::int32_t, AnnealingSchedule> paper001_schedules(double k_max_n)
@@ -89,7 +92,7 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
 
     BackwardEulerOptions dynamics = options.dynamics;
     dynamics.fixed_newton_iterations = options.newton_iterations_per_step;
-    BackwardEuler integrator(model, dynamics, nullptr, options.structures);
+    BackwardEuler integrator(model, dynamics, options.coupling, options.structures);
     const std::size_t n = 3 * model.node_count();
     const std::vector<double>& rest = model.rest_positions();
     SurfaceRegistrationResult result;
@@ -129,6 +132,7 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
             loads.external_forces_n = forces;
             if (!options.fixed_nodes.empty() && !elastic_support)
                 loads.constraints.push_back({"support", options.fixed_nodes, {true, true, true}, Vec3::Zero()});
+            for (const auto& partial : options.partial_supports) loads.constraints.push_back(partial);
             integrator.set_loads(std::move(loads));
             integrator.set_external_stiffness(stiffness);
             previous = u;
@@ -387,35 +391,59 @@ RobustRigidResult register_surface_rigid_robust(const std::vector<double>& rest,
     return out;
 }
 
-SurfaceRegistrationResult register_surface_cloud(const VolumeMesh& mesh, const LabelledTriangles& surface, const LabelledPointCloud& cloud,
-                                                 const SurfaceCloudProblem& problem, const std::function<void(double, const std::string&)>& progress)
+SurfaceRegistrationResult register_cloud(const Model& model, const LabelledPointCloud& cloud, const CloudRegistrationSettings& settings,
+                                         const std::function<void(double, const std::string&)>& progress)
 {
-    if (mesh.cell_type != CellType::tetrahedron) fail("surface registration: the model must hold tetrahedra (paper 001's model)");
+    model.validate("surface registration: the model");
+    if (model.surface.triangles.empty()) fail("surface registration: the model has no surface to match the cloud to");
     if (cloud.points.empty()) fail("surface registration: the cloud has no point");
-    if (!(problem.traction_ratio > 0.0) || !std::isfinite(problem.traction_ratio)) fail("surface registration: traction ratio {} must be > 0", problem.traction_ratio);
+    if (!(settings.traction_ratio > 0.0) || !std::isfinite(settings.traction_ratio))
+        fail("surface registration: traction ratio {} must be > 0", settings.traction_ratio);
+    if (!(settings.young_modulus_pa >= 0.0) || !std::isfinite(settings.young_modulus_pa))
+        fail("surface registration: Young's modulus {} Pa of the pair stiffness must be > 0 (0: the surface's softest tissue)", settings.young_modulus_pa);
     TledOptions tled;
-    tled.law = MaterialLaw::corotational;
-    const TledModel model(mesh, homogeneous_liver_tissues(problem.young_modulus_pa, problem.poisson_ratio), tled);
-    const SurfaceMatcher matcher(surface, mesh.node_count(), "the model's surface");
-    SurfaceRegistrationOptions options = problem.options;
-    options.fixed_nodes = problem.support_nodes;
-    for (auto n : problem.support_nodes)
-        if (n < 0 || static_cast<std::size_t>(n) >= mesh.node_count()) fail("surface registration: support node {} is not a node of the model ({} nodes)", n, mesh.node_count());
-    if (problem.posterior_support) {
-        const auto nodes = surface_nodes_facing(mesh, surface, Vec3::UnitY(), 0.5);
-        if (nodes.empty()) fail("surface registration: no surface node faces posterior (+y) in the model");
-        options.fixed_nodes.insert(options.fixed_nodes.end(), nodes.begin(), nodes.end());
-    }
-    std::sort(options.fixed_nodes.begin(), options.fixed_nodes.end());
-    options.fixed_nodes.erase(std::unique(options.fixed_nodes.begin(), options.fixed_nodes.end()), options.fixed_nodes.end());
+    tled.law = MaterialLaw::corotational; // paper 001's law, whatever law the model was built for
+    const TledModel tled_model(model.mesh, model.tissues, tled);
+    const SurfaceMatcher matcher(model.surface, model.mesh.node_count(), "the model's surface");
+    SurfaceRegistrationOptions options = settings.options;
+    options.fixed_nodes = model.held_nodes();
+    options.partial_supports = model.partial_supports();
+    options.structures = model.structure_pointers();
+    options.coupling = model.coupling.get();
     std::set<std::int32_t> surface_nodes;
-    for (const auto& t : surface.triangles) surface_nodes.insert(t.begin(), t.end());
+    for (const auto& t : model.surface.triangles) surface_nodes.insert(t.begin(), t.end());
     std::size_t held_on_surface = 0;
     for (auto n : options.fixed_nodes) held_on_surface += surface_nodes.count(n);
     if (!options.fixed_nodes.empty() && held_on_surface >= surface_nodes.size())
         fail("surface registration: the supports take every one of the {} surface nodes; nothing is left free to meet the cloud", surface_nodes.size());
-    options.schedules = paper001_schedules(pair_stiffness_n(problem.traction_ratio, problem.young_modulus_pa, mean_point_spacing_mm(cloud.points)));
-    return register_surface_biomechanical(model, matcher, cloud, options, progress);
+    const double young = settings.young_modulus_pa > 0.0 ? settings.young_modulus_pa : model.surface_young_modulus_pa();
+    options.schedules = paper001_schedules(pair_stiffness_n(settings.traction_ratio, young, mean_point_spacing_mm(cloud.points)));
+    return register_surface_biomechanical(tled_model, matcher, cloud, options, progress);
+}
+
+SurfaceRegistrationResult register_surface_cloud(const VolumeMesh& mesh, const LabelledTriangles& surface, const LabelledPointCloud& cloud,
+                                                 const SurfaceCloudProblem& problem, const std::function<void(double, const std::string&)>& progress)
+{
+    if (mesh.cell_type != CellType::tetrahedron) fail("surface registration: the model must hold tetrahedra (paper 001's model)");
+    for (auto n : problem.support_nodes)
+        if (n < 0 || static_cast<std::size_t>(n) >= mesh.node_count()) fail("surface registration: support node {} is not a node of the model ({} nodes)", n, mesh.node_count());
+    std::vector<std::int32_t> held = problem.support_nodes;
+    if (problem.posterior_support) {
+        const auto nodes = surface_nodes_facing(mesh, surface, Vec3::UnitY(), 0.5);
+        if (nodes.empty()) fail("surface registration: no surface node faces posterior (+y) in the model");
+        held.insert(held.end(), nodes.begin(), nodes.end());
+    }
+    Model model;
+    model.mesh = mesh;
+    model.tissues = homogeneous_liver_tissues(problem.young_modulus_pa, problem.poisson_ratio);
+    model.law = MaterialLaw::corotational;
+    model.surface = surface;
+    if (!held.empty()) model.supports.push_back({"support", held, {true, true, true}, Vec3::Zero()});
+    CloudRegistrationSettings settings;
+    settings.traction_ratio = problem.traction_ratio;
+    settings.young_modulus_pa = problem.young_modulus_pa;
+    settings.options = problem.options;
+    return register_cloud(model, cloud, settings, progress);
 }
 
 } // namespace physreg

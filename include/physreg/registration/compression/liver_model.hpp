@@ -16,6 +16,7 @@
 #include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/mesh/coarsen.hpp"
 #include "physreg/model/label_roles.hpp"
+#include "physreg/registration/model.hpp"
 
 #include <filesystem>
 #include <memory>
@@ -80,6 +81,20 @@ struct LiverModel {
     /// Same mesh and tissues with new coupling stiffnesses (no re-meshing, no MLS rebuild).
     void set_coupling_stiffness(const CouplingStiffness& stiffness);
 };
+
+/// The model as the three registration modes share it (registration/model.hpp): mesh, tissues,
+/// Neo-Hookean law, supports, the tissue coupling. Its surface is the boundary of the cells whose
+/// label is in `surface_labels` — e.g. the liver's, the organ an intra-operative cloud sees inside
+/// the body — or, with none given, the mesh's outer boundary.
+Model to_model(const LiverModel& model, const std::set<std::int32_t>& surface_labels = {});
+
+/// The compression mode's model (TLED, the tool's contact) of a shared model, so a tool can drive
+/// any model on a grid of hexahedra (landmarks and the tool's reach use the grid's cells).
+/// Supports holding whole nodes become fixed nodes, supports holding y alone table nodes (region
+/// body); the coupling, if any, is kept (variant coupled). Throws Error naming `what` for
+/// tetrahedra or a mesh without its grid, other partial supports, and auxiliary structures
+/// (the explicit solver has none).
+LiverModel compression_model(const Model& model, const std::string& what);
 
 /// The grid a dataset's model gets when none is asked for: paper 000's 74 × 54 × 18 cells (`cap`)
 /// over the liver's bounding box, or one cell per voxel along an axis where the liver (with its

@@ -39,4 +39,10 @@ struct SegmentationAlignment {
 SegmentationAlignment align_segmentations(const LabelVolume& fixed, const LabelVolume& moving, const std::vector<std::int32_t>& structures,
                                           InitialAlignment mode);
 
+class SignedDistanceMap;
+/// The rigid motion that brings each structure's `points` (e.g. a model's boundary nodes) nearest
+/// the zero level of its fixed distance map (`maps[s]`, nullptr: left out): the same Gauss–Newton,
+/// started from the identity. Throws Error when no structure has both a map and points.
+SegmentationAlignment align_points_to_maps(const std::vector<const SignedDistanceMap*>& maps, const std::vector<std::vector<Vec3>>& points);
+
 } // namespace physreg

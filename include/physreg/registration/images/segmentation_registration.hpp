@@ -28,6 +28,7 @@
 // estimated relative to it.
 #include "physreg/image/distance_map.hpp"
 #include "physreg/mechanics/implicit/linear_elasticity.hpp"
+#include "physreg/registration/model.hpp"
 
 #include <Eigen/Core>
 #include <functional>
@@ -130,6 +131,12 @@ struct SegmentationRegistrationOptions {
     /// Issue 30: solves by CG preconditioned by an earlier factor, refactorising only when it has
     /// gone stale (LinearElasticOptions::reuse_factor); false: a factorisation per set of moduli.
     bool reuse_factor = true;
+    /// register_segmentation(Model, …) only: a model without supports is first moved rigidly onto
+    /// the segmentation (its boundary nodes onto the distance maps' zero levels, Gauss–Newton) when
+    /// that removes more than this fraction of their rms distance, as register-images'
+    /// --initial-min-reduction: a segmentation fixes only the normal motion of a smooth boundary,
+    /// so a slide along it is left to the rigid fit. ≥ 1: never.
+    double rigid_min_reduction = 0.5;
     void validate() const;
 };
 
@@ -165,6 +172,7 @@ struct SegmentationRegistrationResult {
     std::size_t inverted_elements = 0; ///< tetrahedra with non-positive volume at the result
     int evaluations = 0, factorisations = 0, pcg_iterations = 0;
     std::string stop_reason;
+    std::string rigid_prefit;                   ///< register_segmentation(Model, …): the rigid pre-fit, applied or not and why
     double seconds = 0.0, factorisation_s = 0.0, solve_s = 0.0;
 };
 
@@ -189,6 +197,18 @@ SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, con
                                                      const SegmentationObjective& objective,
                                                      const std::vector<std::int32_t>& force_nodes, const std::vector<double>& initial_moduli_pa,
                                                      const SegmentationRegistrationOptions& options,
+                                                     const std::function<void(double, const std::string&)>& progress = {});
+
+/// Paper 002's method on any shared model (registration/model.hpp), issue 29: the model's mesh
+/// (hexahedra split into six tetrahedra each, nodes unchanged, so the displacement is the model's),
+/// one structure per cell label starting from its tissue's modulus and with its Poisson ratio, the
+/// supports held, every other node of the outer boundary loaded; each structure's boundary is
+/// drawn to the same label of `fixed_labels` (a label absent there takes part in the mechanics
+/// only). A model without supports is first moved rigidly (options.rigid_min_reduction); the
+/// displacement returned includes that motion. The law is paper 002's (linear, or options.corotational), whatever the model's. Throws
+/// Error naming the problem for coupled tissues (split interfaces), auxiliary structures, supports
+/// that hold single directions, and a fixed segmentation without any of the model's labels.
+SegmentationRegistrationResult register_segmentation(const Model& model, const LabelVolume& fixed_labels, const SegmentationRegistrationOptions& options,
                                                      const std::function<void(double, const std::string&)>& progress = {});
 
 } // namespace physreg

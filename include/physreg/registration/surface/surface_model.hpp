@@ -8,6 +8,7 @@
 #include "physreg/mesh/tetrahedral_meshing.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
 #include "physreg/model/tissue_table.hpp"
+#include "physreg/registration/model.hpp"
 #include "physreg/registration/surface/surface_matching.hpp"
 
 #include <optional>
@@ -69,6 +70,11 @@ LabelledTriangles regions_from_surface(const VolumeMesh& mesh, const LabelledTri
 /// region as the inside label — written as PLY it opens in ParaView (face data) and reads back with
 /// regions_from_surface.
 SurfaceMesh regions_surface(const VolumeMesh& mesh, const LabelledTriangles& boundary, const std::vector<double>* displacement_mm = nullptr);
+
+/// The shared model (registration/model.hpp) of a paper 001 liver: its tetrahedra and labelled
+/// surface, `tissues` for its cell label(s), the co-rotational law, and `supports` (none: paper 001).
+/// Throws Error naming the problem, as Model::validate.
+Model to_model(const SurfaceModel& model, const TissueTable& tissues, std::vector<NodeConstraint> supports = {});
 
 /// One homogeneous parenchyma (label 1): paper 001's healthy (3.5 kPa) or cirrhotic (30 kPa) liver, ν 0.45.
 TissueTable homogeneous_liver_tissues(double young_modulus_pa, double poisson_ratio = 0.45);

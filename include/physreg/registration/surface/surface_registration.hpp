@@ -12,6 +12,7 @@
 // point-to-plane (a 6×6 least-squares step per iteration).
 #include "physreg/mechanics/implicit/backward_euler.hpp"
 #include "physreg/mechanics/elements/tled_model.hpp"
+#include "physreg/registration/model.hpp"
 #include "physreg/registration/surface/surface_matching.hpp"
 
 #include <functional>
@@ -42,6 +43,11 @@ struct SurfaceRegistrationOptions {
     /// 0: `fixed_nodes` held (Dirichlet); > 0: each tied to its rest position by a spring of this
     /// stiffness per direction (N/mm), because ligaments stretch.
     double support_stiffness_n_per_mm = 0.0;
+    /// Supports that hold only some directions (a table's normal), always held; node ids checked.
+    std::vector<NodeConstraint> partial_supports;
+    /// Tissue–tissue penalty coupling of a model with split interfaces (paper 000's coupled body
+    /// model); null: none. It must outlive the call.
+    const PenaltyCoupling* coupling = nullptr;
     void validate() const;
     /// Δt 0.1 s, Rayleigh mass and stiffness coefficients 0.1 (paper 001), lumped mass, stale tangent.
     static BackwardEulerOptions paper001_dynamics();
@@ -101,6 +107,21 @@ struct SurfaceCloudProblem {
 SurfaceRegistrationResult register_surface_cloud(const VolumeMesh& mesh, const LabelledTriangles& surface, const LabelledPointCloud& cloud,
                                                  const SurfaceCloudProblem& problem,
                                                  const std::function<void(double, const std::string&)>& progress = {});
+
+/// Paper 001's method on any shared model (registration/model.hpp), issue 29: the model's mesh
+/// (tetrahedra or hexahedra), its per-element moduli under the co-rotational law (paper 001's), its
+/// supports, structures and coupling, its surface matched to the cloud; paper 001's schedules with
+/// k_max = pair_stiffness_n(traction ratio, E, the cloud's mean spacing). So a paper 000 body model
+/// can follow a partial liver surface seen inside it.
+struct CloudRegistrationSettings {
+    double traction_ratio = 0.5;             ///< the largest pair traction as a fraction of E
+    double young_modulus_pa = 0.0;           ///< E of the pair stiffness; 0: Model::surface_young_modulus_pa()
+    SurfaceRegistrationOptions options;      ///< its schedules, supports, structures and coupling are set from the model
+};
+/// Throws Error as register_surface_biomechanical does, for a model without surface, and for
+/// supports that take every surface node.
+SurfaceRegistrationResult register_cloud(const Model& model, const LabelledPointCloud& cloud, const CloudRegistrationSettings& settings,
+                                         const std::function<void(double, const std::string&)>& progress = {});
 
 struct RigidSurfaceResult {
     Mat3 rotation = Mat3::Identity();
