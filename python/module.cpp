@@ -193,6 +193,33 @@ TissueTable tissues_from(const VolumeMesh& mesh, const std::optional<std::map<st
     return table;
 }
 
+/// mesh_from_labels' work: hexahedra from the voxels or a grid, or CGAL tetrahedra.
+VolumeMesh mesh_labels(const py::array& labels, const ImageGeometry& geometry, const std::string& kind, std::optional<std::array<int, 3>> grid,
+                       double cell_size_mm, double facet_distance_mm, std::optional<std::vector<std::int32_t>> only, unsigned seed)
+{
+    const LabelVolume v = label_volume_from(labels, geometry);
+    if (kind == "hex") {
+        MeshingOptions o;
+        if (grid) o.grid_dims = Index3{(*grid)[0], (*grid)[1], (*grid)[2]};
+        py::gil_scoped_release release;
+        return mesh_label_volume(v, default_tissue_table(), o, "labels").mesh;
+    }
+    if (kind == "tet") {
+        if (!(cell_size_mm > 0) || !std::isfinite(cell_size_mm)) throw py::value_error(fmt::format("cell_size_mm: {} must be a positive number", cell_size_mm));
+        if (!(facet_distance_mm > 0) || !std::isfinite(facet_distance_mm)) throw py::value_error(fmt::format("facet_distance_mm: {} must be a positive number", facet_distance_mm));
+        TetMeshingOptions o;
+        o.default_cell_size_mm = cell_size_mm;
+        o.facet_size_mm = cell_size_mm;
+        o.facet_distance_mm = facet_distance_mm;
+        o.seed = seed;
+        o.seed_every_component = true;
+        if (only) o.labels.insert(only->begin(), only->end());
+        py::gil_scoped_release release;
+        return mesh_labels_tetrahedral(v, o, "labels");
+    }
+    throw py::value_error(fmt::format("kind: '{}' is not one of 'hex', 'tet'", kind));
+}
+
 py::dict stats_dict(const TreStats& s)
 {
     py::dict d;
@@ -325,30 +352,7 @@ PYBIND11_MODULE(_physreg, m)
           "Reads a volume mesh (VTK XML .vtu or Gmsh .msh).");
     m.def("write_mesh", [](const std::filesystem::path& path, const VolumeMesh& mesh) { write_volume_mesh(path, mesh); }, py::arg("path"), py::arg("mesh"),
           "Writes a volume mesh (.vtu; .msh for Gmsh 4.1, .v2.msh for 2.2; atomically).");
-    m.def("mesh_from_labels", [](const py::array& labels, const ImageGeometry& geometry, const std::string& kind, std::optional<std::array<int, 3>> grid,
-                                 double cell_size_mm, double facet_distance_mm, std::optional<std::vector<std::int32_t>> only, unsigned seed) {
-        const LabelVolume v = label_volume_from(labels, geometry);
-        if (kind == "hex") {
-            MeshingOptions o;
-            if (grid) o.grid_dims = Index3{(*grid)[0], (*grid)[1], (*grid)[2]};
-            py::gil_scoped_release release;
-            return mesh_label_volume(v, default_tissue_table(), o, "labels").mesh;
-        }
-        if (kind == "tet") {
-            if (!(cell_size_mm > 0) || !std::isfinite(cell_size_mm)) throw py::value_error(fmt::format("cell_size_mm: {} must be a positive number", cell_size_mm));
-            if (!(facet_distance_mm > 0) || !std::isfinite(facet_distance_mm)) throw py::value_error(fmt::format("facet_distance_mm: {} must be a positive number", facet_distance_mm));
-            TetMeshingOptions o;
-            o.default_cell_size_mm = cell_size_mm;
-            o.facet_size_mm = cell_size_mm;
-            o.facet_distance_mm = facet_distance_mm;
-            o.seed = seed;
-            o.seed_every_component = true;
-            if (only) o.labels.insert(only->begin(), only->end());
-            py::gil_scoped_release release;
-            return mesh_labels_tetrahedral(v, o, "labels");
-        }
-        throw py::value_error(fmt::format("kind: '{}' is not one of 'hex', 'tet'", kind));
-    }, py::arg("labels"), py::arg("geometry"), py::arg("kind") = "hex", py::arg("grid") = py::none(), py::arg("cell_size_mm") = 6.0,
+    m.def("mesh_from_labels", &mesh_labels, py::arg("labels"), py::arg("geometry"), py::arg("kind") = "hex", py::arg("grid") = py::none(), py::arg("cell_size_mm") = 6.0,
           py::arg("facet_distance_mm") = 0.75, py::arg("labels_meshed") = py::none(), py::arg("seed") = 1u,
           "Meshes a label volume. kind='hex': uniform hexahedra straight from the voxels (paper 000), optionally "
           "coarsened to `grid` cells (i, j, k) over the labels' bounding box; kind='tet': conforming tetrahedra (CGAL Mesh_3), "
@@ -580,6 +584,21 @@ PYBIND11_MODULE(_physreg, m)
            "A model of `mesh` (physreg.mesh_from_labels, read_mesh): tissues {label: (young_modulus_pa, poisson_ratio)} (labels left out: "
            "3.5 kPa, 0.45), the law (neo-hookean, corotational, svk, linear, mooney-rivlin), and its surface: the boundary of the cells "
            "of surface_labels (default: the whole outer boundary), every region 0.")
+        .def_static("from_labels", [](const py::array& labels, const ImageGeometry& geometry, const std::string& kind, std::optional<std::array<int, 3>> grid,
+                                      double cell_size_mm, std::optional<std::map<std::int32_t, std::pair<double, double>>> tissues, const std::string& law,
+                                      std::optional<std::vector<std::int32_t>> surface_labels, unsigned seed) {
+            Model model;
+            model.mesh = mesh_labels(labels, geometry, kind, grid, cell_size_mm, 0.75, std::nullopt, seed);
+            model.tissues = tissues_from(model.mesh, tissues);
+            model.law = parse_material_law(law);
+            const std::set<std::int32_t> keep = surface_labels ? std::set<std::int32_t>(surface_labels->begin(), surface_labels->end()) : std::set<std::int32_t>{};
+            model.surface = cell_group_boundary(model.mesh, [&](std::int32_t l) { return keep.empty() || keep.count(l) > 0; }, "surface_labels");
+            model.validate("labels");
+            return model;
+        }, py::arg("labels"), py::arg("geometry"), py::arg("kind") = "hex", py::arg("grid") = py::none(), py::arg("cell_size_mm") = 6.0,
+           py::arg("tissues") = py::none(), py::arg("law") = "neo-hookean", py::arg("surface_labels") = py::none(), py::arg("seed") = 1u,
+           "A model meshed from a uint16 label array [z, y, x] as mesh_from_labels does (kind 'hex': grid hexahedra, which a Tool can "
+           "drive; 'tet': CGAL tetrahedra of cell_size_mm), then as from_mesh.")
         .def("hold", [](Model& model, const std::vector<std::int32_t>& nodes, const std::string& directions, const std::string& name) {
             std::array<bool, 3> dofs{false, false, false};
             for (const char c : directions) {

@@ -11,7 +11,7 @@ Building blocks (C++ core, arrays without copies where the layout allows):
     tre, hausdorff
 
 In memory (numpy arrays in, result objects out; no files):
-    Model (from_mesh; SurfaceModel.to_model) — one model for the three modes — and what is seen:
+    Model (from_labels, from_mesh; SurfaceModel.to_model) — one model for the three modes — and what is seen:
     Tool (poses), Cloud (points, labels, normals), Segmentation (label array + geometry);
     register(model, observation) → Registration (.mode, .displacement, .field(), .map_points())
     picks the solver: TLED for a tool (paper 000), co-rotational backward Euler for a cloud

@@ -111,10 +111,11 @@ def test_a_segmentation_held_in_memory_moves_the_model_by_its_shift(model_and_cl
 def test_a_tool_drives_a_hexahedral_model_and_refuses_tetrahedra(model_and_cloud, dataset):
     labels, geometry = physreg.read_labels(dataset / "rest" / "labels.nii.gz")
     liver = np.isin(labels, [2, 3, 4]).astype(np.uint16)
-    hexahedra = physreg.mesh_from_labels(liver, geometry, kind="hex", grid=(12, 9, 6))
-    model = physreg.Model.from_mesh(hexahedra, tissues={1: (3500.0, 0.45)})
+    model = physreg.Model.from_labels(liver, geometry, kind="hex", grid=(12, 9, 6), tissues={1: (3500.0, 0.45)})
+    assert "hexahedra" in repr(model) and model.tissues == {1: (3500.0, 0.45)}
     model.hold(model.surface_nodes_facing((0.0, 1.0, 0.0)))
-    nodes = hexahedra.nodes
+    assert model.supports[0][2] == "xyz" and len(model.supports[0][1]) > 0
+    nodes = model.mesh.nodes
     front = nodes[np.argmin(nodes[:, 1])]
     radius = 10.0
     start = front - np.array([0.0, radius, 0.0])
