@@ -48,7 +48,7 @@ struct Options : CommonOptions {
     std::optional<double> notch_x, young_modulus;
     double poisson = 0.45, cell_size = 7.0, field_spacing = 2.0;
     double noise = 0.5;
-    double d90 = 5.0, traction = 0.5, distance_fraction = 0.9, normal_agreement = 0.7, time_step = 0.1, plateau_tolerance = 0.01, max_pair = 40.0;
+    double d90 = 5.0, traction = 0.5, distance_fraction = 0.9, normal_agreement = 0.7, time_step = 0.1, plateau_tolerance = 0.01, plateau_rms_fraction = 0.5, max_pair = 40.0;
     int max_steps = 100, newton_per_step = 1;
     unsigned seed = 1;
     bool replace = false;
@@ -432,7 +432,9 @@ void add_subcommand_register_surface(CLI::App& app)
     sub->add_option("--support-tolerance", o->support_tolerance, "Rigid baselines: a pose that moves a support node farther than this is "
                                                                  "implausible, mm (default 3)");
     sub->add_option("--time-step", o->time_step, "Backward Euler time step, s (default 0.1)");
-    sub->add_option("--plateau-tolerance", o->plateau_tolerance, "A plateau ends when no node moves more than this in a step, mm (default 0.01)");
+    sub->add_option("--plateau-tolerance", o->plateau_tolerance, "A plateau ends when no node moves more than this in a step, mm (default 0.01)…");
+    sub->add_option("--plateau-rms-fraction", o->plateau_rms_fraction, "…or when the nodes' rms motion in a step is below this fraction of "
+                                                                     "the plateau tolerance (default 0.5; 0: off, paper 001's rule)");
     sub->add_option("--newton-per-step", o->newton_per_step, "Newton iterations per time step (default 1: linearised backward Euler; 0: to convergence)");
     sub->add_option("--max-steps-per-plateau", o->max_steps, "Time steps per plateau at most (default 100)");
     sub->add_option("--field-spacing", o->field_spacing, "Voxel size of displacement.nii.gz when no label volume gives the grid, mm (default 2)");
@@ -483,6 +485,7 @@ void add_subcommand_register_surface(CLI::App& app)
         options.force.d90_mm = o->d90;
         options.dynamics.time_step_s = o->time_step;
         options.plateau_tolerance_mm = o->plateau_tolerance;
+        options.plateau_rms_fraction = o->plateau_rms_fraction;
         options.max_steps_per_plateau = o->max_steps;
         options.newton_iterations_per_step = o->newton_per_step;
         if (capsule) options.structures.push_back(&*capsule);
@@ -531,7 +534,7 @@ void add_subcommand_register_surface(CLI::App& app)
             for (const auto& p : b.plateaus) {
                 json k;
                 for (const auto& [label, v] : p.stiffness_n) k[std::to_string(label)] = v;
-                plateaus.push_back({{"plateau", p.plateau}, {"stiffness_n", k}, {"steps", p.steps}, {"settled", p.reached}, {"last_step_mm", p.last_step_mm},
+                plateaus.push_back({{"plateau", p.plateau}, {"stiffness_n", k}, {"steps", p.steps}, {"settled", p.reached}, {"last_step_mm", p.last_step_mm}, {"last_step_rms_mm", p.last_step_rms_mm},
                                     {"pairs", p.matching.kept}, {"pruned_far", p.matching.pruned_far}, {"pruned_distance", p.matching.pruned_distance}, {"pruned_normal", p.matching.pruned_normal},
                                     {"mean_pair_distance_mm", p.matching.mean_distance_mm}, {"factorisations", p.factorisations}, {"seconds", p.seconds}});
             }
@@ -645,7 +648,7 @@ void add_subcommand_register_surface(CLI::App& app)
         summary["cloud"] = {{"points", in.cloud.points.size()}, {"mean_spacing_mm", spacing}, {"normals", !in.cloud.normals.empty()}};
         summary["parameters"] = {{"cell_size_mm", o->cell_size}, {"d90_mm", o->d90}, {"traction_ratio", o->traction}, {"k_max_n", k_max}, {"distance_fraction", o->distance_fraction},
                                  {"normal_agreement", o->normal_agreement}, {"time_step_s", o->time_step}, {"rayleigh_mass_per_s", 0.1},
-                                 {"rayleigh_stiffness_s", 0.1}, {"plateau_tolerance_mm", o->plateau_tolerance}, {"exponent", 3},
+                                 {"rayleigh_stiffness_s", 0.1}, {"plateau_tolerance_mm", o->plateau_tolerance}, {"plateau_rms_fraction", o->plateau_rms_fraction}, {"exponent", 3},
                                  {"r", {{"umbilical_notch", 2}, {"anterior_margin", 4}, {"surface", 10}}}};
         summary["methods"] = methods;
         summary["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

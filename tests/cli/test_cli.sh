@@ -237,6 +237,11 @@ expect_ok "register-surface from a mesh, regions and a cloud" "$physreg" $rs --m
   --truth-surface "$ph/states/insufflation/liver_surface.ply" --method rigid --support posterior -o "$work/rs2"
 grep -q '"method": "rigid"' "$work/rs2/summary.json" && pass || failed "register-surface --method rigid recorded"
 expect_error "register-surface: output exists" "not empty" "$physreg" $rs --dataset "$ph" --visible 50 -o "$work/rs"
+python3 -c "import json,sys; p=json.load(open(sys.argv[1]))['methods']['biomechanical']['plateaus']; assert all('last_step_rms_mm' in x for x in p)" "$work/rs/summary.json" \
+  && pass || failed "register-surface summary: plateaus report their last step's rms motion"
+expect_error "register-surface: rms plateau fraction outside [0, 1]" "plateau rms fraction 2 must lie in [0, 1]" "$physreg" $rs --dataset "$ph" --visible 50 \
+  --plateau-rms-fraction 2 -o "$work/rs_bad_rms"
+expect_no_file "$work/rs_bad_rms"
 expect_error "register-surface: visible fraction not in the dataset" "no partial surface with 30 % visible" "$physreg" $rs --dataset "$ph" -o "$work/rs_bad1"
 expect_no_file "$work/rs_bad1"
 expect_error "register-surface: cloud label without region" "no region with that label" "$physreg" $rs --model "$work/rs/mesh.vtu" --cloud "$cloud" -o "$work/rs_bad2"

@@ -53,6 +53,8 @@ void SurfaceRegistrationOptions::validate() const
     for (const auto& [label, s] : schedules) s.validate(fmt::format("surface registration: schedule of label {}", label));
     if (!(plateau_tolerance_mm > 0 && std::isfinite(plateau_tolerance_mm)))
         fail("surface registration: plateau tolerance {} mm must be > 0", plateau_tolerance_mm);
+    if (!(plateau_rms_fraction >= 0 && plateau_rms_fraction <= 1))
+        fail("surface registration: plateau rms fraction {} must lie in [0, 1] (0: off)", plateau_rms_fraction);
     if (newton_iterations_per_step < 0) fail("surface registration: Newton iterations per step {} must be ≥ 0", newton_iterations_per_step);
     if (max_steps_per_plateau < 1) fail("surface registration: max steps per plateau {} must be ≥ 1", max_steps_per_plateau);
     if (!(support_stiffness_n_per_mm >= 0 && std::isfinite(support_stiffness_n_per_mm)))
@@ -148,12 +150,16 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
             result.assembly_s += s.assembly_s;
             result.factorisation_s += s.factorisation_s;
             result.solve_s += s.solve_s;
-            double largest = 0.0;
+            double largest = 0.0, squares = 0.0;
             const auto& u1 = integrator.displacement_mm();
-            for (std::size_t i = 0; i < n; i += 3)
-                largest = std::max(largest, std::hypot(u1[i] - previous[i], u1[i + 1] - previous[i + 1], u1[i + 2] - previous[i + 2]));
+            for (std::size_t i = 0; i < n; i += 3) {
+                const double motion = std::hypot(u1[i] - previous[i], u1[i + 1] - previous[i + 1], u1[i + 2] - previous[i + 2]);
+                largest = std::max(largest, motion);
+                squares += motion * motion;
+            }
             report.last_step_mm = largest;
-            if (largest <= options.plateau_tolerance_mm) {
+            report.last_step_rms_mm = std::sqrt(squares / static_cast<double>(n / 3));
+            if (largest <= options.plateau_tolerance_mm || report.last_step_rms_mm <= options.plateau_rms_fraction * options.plateau_tolerance_mm) {
                 report.reached = true;
                 break;
             }
@@ -161,10 +167,10 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
         report.factorisations = integrator.total_factorisations() - factorisations_before;
         report.seconds = seconds_since(plateau_start);
         logger()->debug("surface registration: plateau {}/{}: {} steps{}, {} pairs (pruned {} by distance, {} by normal), mean distance {:.3f} mm, "
-                        "last step {:.4f} mm, {:.2f} s",
+                        "last step {:.4f} mm (rms {:.5f}), {:.2f} s",
                         plateau + 1, plateaus, report.steps, report.reached ? "" : " (not settled)", report.matching.kept,
                         report.matching.pruned_distance, report.matching.pruned_normal, report.matching.mean_distance_mm, report.last_step_mm,
-                        report.seconds);
+                        report.last_step_rms_mm, report.seconds);
         result.plateaus.push_back(report);
         if (progress)
             progress(static_cast<double>(plateau + 1) / plateaus,

@@ -358,12 +358,13 @@ TEST(SurfaceRegistration, AdjointMethodFollowsAStretchAndStopsAtTheNoiseLevel)
 namespace {
 struct HiddenError {
     double registered_mm = 0.0, at_rest_mm = 0.0, fit_mm = 0.0;
-    std::size_t plateaus = 0, progress_calls = 0;
+    std::size_t plateaus = 0, progress_calls = 0, steps = 0;
 };
 
 // Registers the ellipsoid (free-floating, paper 001) to its anterior cloud moved by `motion`;
 // mean errors of the nodes the final match does not use, and the cloud-to-model fit.
-HiddenError register_ellipsoid(const std::function<Vec3(const Vec3&)>& motion, double plateau_tolerance_mm)
+HiddenError register_ellipsoid(const std::function<Vec3(const Vec3&)>& motion, double plateau_tolerance_mm,
+                               double rms_fraction = SurfaceRegistrationOptions{}.plateau_rms_fraction)
 {
     const SurfaceModel& model = ellipsoid_model();
     const LabelledPointCloud cloud = anterior_cloud(model, motion);
@@ -375,9 +376,11 @@ HiddenError register_ellipsoid(const std::function<Vec3(const Vec3&)>& motion, d
     options.schedules = paper001_schedules(pair_stiffness_n(0.5, 3500.0, mean_point_spacing_mm(cloud.points)));
     options.matching.distance_fraction = 1.0;
     options.plateau_tolerance_mm = plateau_tolerance_mm;
+    options.plateau_rms_fraction = rms_fraction;
     HiddenError out;
     const SurfaceRegistrationResult r = register_surface_biomechanical(fem, matcher, cloud, options, [&](double, const std::string&) { ++out.progress_calls; });
     out.plateaus = r.plateaus.size();
+    out.steps = r.steps;
     EXPECT_GT(r.plateaus.back().stiffness_n.at(feature_none), r.plateaus.front().stiffness_n.at(feature_none));
     out.fit_mm = points_to_surface(cloud.points, regions_surface(model.mesh, model.surface, &r.displacement_mm), "fit").mean_mm;
     std::size_t count = 0;
@@ -419,6 +422,23 @@ TEST(SurfaceRegistration, StretchedPartialSurfaceIsMetAndTheHiddenSideFollowsPar
     }, SurfaceRegistrationOptions{}.plateau_tolerance_mm);
     EXPECT_LT(e.fit_mm, 0.35);
     EXPECT_LT(e.registered_mm, 0.65 * e.at_rest_mm) << "mean hidden-node error " << e.registered_mm << " mm vs " << e.at_rest_mm << " mm at rest";
+}
+
+TEST(SurfaceRegistration, TheRmsRuleNeverTakesMoreStepsAndKeepsTheResult)
+{
+    // Issue 30: a plateau also ends when the rms nodal motion of a step is below half the plateau
+    // tolerance (limit cycles of a few switching pairs never settle by the largest motion). Where
+    // the motion is spread over the model the rule changes nothing it should not.
+    const Vec3 centre(36, 24, 19.5);
+    const auto stretch = [&](const Vec3& p) {
+        return Vec3(centre + Vec3(1.06 * (p.x() - centre.x()), p.y() - centre.y(), p.z() - centre.z()) + Vec3(0, 1.5, 0));
+    };
+    const HiddenError with = register_ellipsoid(stretch, 0.01, 0.5), without = register_ellipsoid(stretch, 0.01, 0.0);
+    std::printf("rms rule: %zu steps, hidden error %.4f mm; largest motion only: %zu steps, %.4f mm\n", with.steps, with.registered_mm, without.steps,
+                without.registered_mm);
+    EXPECT_LE(with.steps, without.steps);
+    EXPECT_NEAR(with.registered_mm, without.registered_mm, 0.02);
+    EXPECT_NE(test::error_message([&] { register_ellipsoid(stretch, 0.01, 1.5); }).find("plateau rms fraction"), std::string::npos);
 }
 
 TEST(SurfaceRegistration, CloudFarFromEveryRegionOrAMissingScheduleIsAnError)

@@ -28,8 +28,15 @@ struct SurfaceRegistrationOptions {
     /// Per feature label; every label of the cloud needs one. paper001_schedules() gives the paper's.
     std::map<std::int32_t, AnnealingSchedule> schedules;
     BackwardEulerOptions dynamics = paper001_dynamics();
-    /// A plateau is reached when no node moves more than this in one time step.
+    /// A plateau is reached when no node moves more than this in one time step…
     double plateau_tolerance_mm = 0.01;
+    /// …or when the nodes' root-mean-square motion in one step is below this fraction of
+    /// plateau_tolerance_mm (0: off). Issue 30: under strong pair forces a plateau ends in a limit
+    /// cycle — a few pairs switch partners every step and move their nodes by 0.1–0.5 mm back and
+    /// forth while the rest stands still — which the largest motion never reports as settled (100
+    /// steps per plateau on the push case). A motion spread over the model (a slow slide) has its
+    /// rms near its largest value, so for it the rule is stricter than the first one, never looser.
+    double plateau_rms_fraction = 0.5;
     int max_steps_per_plateau = 100; ///< then the next plateau starts anyway (reported as not reached)
     /// > 0: this many Newton iterations per time step on a Jacobian refreshed at each plateau's
     /// start (linearised backward Euler, as SOFA's EulerImplicit: the equilibrium is the same, only
@@ -68,6 +75,7 @@ struct PlateauReport {
     int steps = 0;
     bool reached = false;       ///< false: max_steps_per_plateau ran out first
     double last_step_mm = 0.0;  ///< largest nodal motion in the plateau's last step
+    double last_step_rms_mm = 0.0; ///< root mean square of the nodal motion in that step
     MatchStatistics matching;   ///< the plateau's last match
     int factorisations = 0;
     double seconds = 0.0;
