@@ -220,6 +220,15 @@ VolumeMesh mesh_labels(const py::array& labels, const ImageGeometry& geometry, c
     throw py::value_error(fmt::format("kind: '{}' is not one of 'hex', 'tet'", kind));
 }
 
+/// A labelled surface's triangles as an (M, 3) int32 array of node ids (a copy).
+py::array_t<std::int32_t> triangles_array(const LabelledTriangles& surface)
+{
+    py::array_t<std::int32_t> t({static_cast<py::ssize_t>(surface.triangles.size()), py::ssize_t{3}});
+    for (std::size_t r = 0; r < surface.triangles.size(); ++r)
+        for (int c = 0; c < 3; ++c) t.mutable_at(static_cast<py::ssize_t>(r), c) = surface.triangles[r][static_cast<std::size_t>(c)];
+    return t;
+}
+
 py::dict stats_dict(const TreStats& s)
 {
     py::dict d;
@@ -461,10 +470,7 @@ PYBIND11_MODULE(_physreg, m)
         }, py::arg("mesh"), "A tetrahedral mesh as register-surface --model takes it: one material, its whole boundary 'surface' (label 0).")
         .def_property_readonly("mesh", [](const SurfaceModel& model) { return model.mesh; }, "The tetrahedra (a copy).")
         .def_property_readonly("surface_triangles", [](const SurfaceModel& model) {
-            py::array_t<std::int32_t> t({static_cast<py::ssize_t>(model.surface.triangles.size()), py::ssize_t{3}});
-            for (std::size_t r = 0; r < model.surface.triangles.size(); ++r)
-                for (int c = 0; c < 3; ++c) t.mutable_at(static_cast<py::ssize_t>(r), c) = model.surface.triangles[r][static_cast<std::size_t>(c)];
-            return t;
+            return triangles_array(model.surface);
         }, "(M, 3) int32 mesh node ids of the outer surface's triangles.")
         .def_property_readonly("surface_labels", [](const SurfaceModel& model) {
             return py::array_t<std::int32_t>(static_cast<py::ssize_t>(model.surface.labels.size()), model.surface.labels.data());
@@ -636,10 +642,7 @@ PYBIND11_MODULE(_physreg, m)
             return out;
         }, "[(name, node ids, directions held)]")
         .def_property_readonly("surface_triangles", [](const Model& model) {
-            py::array_t<std::int32_t> t({static_cast<py::ssize_t>(model.surface.triangles.size()), py::ssize_t{3}});
-            for (std::size_t r = 0; r < model.surface.triangles.size(); ++r)
-                for (int c = 0; c < 3; ++c) t.mutable_at(static_cast<py::ssize_t>(r), c) = model.surface.triangles[r][static_cast<std::size_t>(c)];
-            return t;
+            return triangles_array(model.surface);
         }, "(M, 3) int32 node ids of the surface's triangles.")
         .def_property_readonly("surface_labels", [](const Model& model) {
             return py::array_t<std::int32_t>(static_cast<py::ssize_t>(model.surface.labels.size()), model.surface.labels.data());
