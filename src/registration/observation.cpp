@@ -9,18 +9,6 @@
 
 namespace physreg {
 
-std::string observation_kind(const Observation& observation)
-{
-    return std::visit(
-        [](const auto& o) -> std::string {
-            using T = std::decay_t<decltype(o)>;
-            if constexpr (std::is_same_v<T, ToolObservation>) return "tool";
-            else if constexpr (std::is_same_v<T, CloudObservation>) return "cloud";
-            else return "segmentation";
-        },
-        observation);
-}
-
 ModelRegistration register_model(const Model& model, const Observation& observation, const ModelRegistrationSettings& settings,
                                  const std::function<void(double, const std::string&)>& progress)
 {

