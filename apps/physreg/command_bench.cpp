@@ -17,6 +17,7 @@
 #include "physreg/registration/compression/estimation.hpp"
 
 #include <omp.h>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <set>
@@ -31,6 +32,14 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 namespace {
+
+/// The process's high-water mark of resident memory, MB (getrusage).
+double peak_rss_mb()
+{
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    return double(usage.ru_maxrss) * 1024.0 / 1e6; // ru_maxrss is in KiB on Linux
+}
 
 double mean_of(const std::vector<double>& v)
 {
@@ -171,6 +180,7 @@ void add_subcommand_bench(CLI::App& app)
         ModelOptions model;
         int steps = 20;
         double margin_mm = 10.0;
+        std::string memory_limit = "auto";
     };
     auto co = std::make_shared<CondensedOptions>();
     auto* cond = group->add_subcommand("condensed", "Time per update with condensed contact (issue 30): the model linearised and factorised "
@@ -193,12 +203,15 @@ void add_subcommand_bench(CLI::App& app)
     cond->add_option("--blend", co->blend, "With --database: auto or a number of blended conditions");
     cond->add_option("--detail-length", co->detail, "With --database: share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²): inf (paper 000; default), L in mm, or auto (leave-one-position-out; measured unreliable, docs/enrichment.md)");
     cond->add_option("--candidate-margin", co->margin_mm, "Candidates: surface nodes within the tool's reach + this of a path, mm (default 10)");
+    cond->add_option("--memory-limit", co->memory_limit, "Memory the precomputation may take (factor, compliance), e.g. 8G; auto (default): "
+                                                         "80 % of the physical memory. Over it: an error naming the size needed");
     cond->add_option("-o,--output", co->output, "JSON report (also printed with --json)");
     cond->add_flag("--json", co->json, "Print the report on stdout");
     cond->callback([co] {
         if (co->steps < 1) fail("--steps must be ≥ 1 (got {})", co->steps);
         if (!(co->margin_mm >= 0)) fail("--candidate-margin must be ≥ 0 mm (got {})", co->margin_mm);
         if (co->nonlinear != "never" && co->nonlinear != "relaxation") fail("--nonlinear must be never or relaxation (got '{}')", co->nonlinear);
+        const std::size_t memory_limit = parse_memory_limit(co->memory_limit, "--memory-limit");
         if (!co->output.empty()) check_output_path(co->output, "--output");
         const LoadedModel loaded = load_model(co->dataset, co->parameters, co->model);
         const auto cases = compression_cases(loaded.dataset, split_names(co->states, "--states"));
@@ -212,6 +225,7 @@ void add_subcommand_bench(CLI::App& app)
         const auto query = nodes_near(loaded.model.mesh, around, 2.0 * loaded.model.cell_size_mm.maxCoeff());
         CondensedContactOptions options;
         options.candidate_margin_mm = co->margin_mm;
+        options.memory_limit_bytes = memory_limit;
         logger()->info("bench condensed: factorising the stiffness at rest and the candidates' compliance");
         CondensedContactModel condensed(loaded.model, tools, query, options);
         // Coarse-to-fine on top (issue 30 item 3): the database's coarse model, condensed too.
@@ -240,7 +254,9 @@ void add_subcommand_bench(CLI::App& app)
                            {"law", "the model's Neo-Hookean tangent at rest (small-strain linear elasticity)"}};
         report["precomputation"] = {{"dofs", pre.dofs}, {"candidate_nodes", pre.candidate_nodes}, {"query_nodes", pre.query_nodes},
                                     {"assembly_s", pre.assembly_s}, {"factorisation_s", pre.factorisation_s},
-                                    {"compliance_s", pre.compliance_s}, {"compliance_mb", double(pre.compliance_bytes) / 1e6}};
+                                    {"compliance_s", pre.compliance_s}, {"compliance_mb", double(pre.compliance_bytes) / 1e6},
+                                    {"factor_nonzeros", pre.factor_nonzeros}, {"memory_estimate_mb", double(pre.memory_bytes) / 1e6},
+                                    {"memory_limit_mb", double(pre.memory_limit_bytes) / 1e6}};
         report["targets"] = {{"high_resolution_ms", 100.0}, {"coarse_to_fine_ms", 10.0}};
         ProgressDisplay bar("bench condensed");
         std::vector<double> all_ms, all_contact, all_recovery, relax_ms;
@@ -351,6 +367,10 @@ void add_subcommand_bench(CLI::App& app)
                                  pre.candidate_nodes, pre.compliance_s, mean_of(all_ms), mean_of(all_contact), mean_of(all_recovery),
                                  pool_tre(tre_train).all.mean_mm, pool_tre(tre_held).all.mean_mm, pool_tre(linear_train).all.mean_mm,
                                  pool_tre(linear_held).all.mean_mm, co->nonlinear, relax_ms.empty() ? 0.0 : mean_of(relax_ms));
+        // Tool positions off the session's paths (none here: the candidates come from these paths).
+        report["precomputation"]["region_extensions"] = {{"updates", pre.region_extensions}, {"added_candidates", pre.added_candidates},
+                                                         {"s", pre.extension_s}};
+        report["peak_rss_mb"] = peak_rss_mb();
         if (!co->output.empty())
             write_atomically(co->output, [&](const fs::path& tmp) { std::ofstream(tmp) << report.dump(2) << "\n"; });
         if (co->json) std::cout << report.dump(2) << std::endl;

@@ -147,6 +147,7 @@ void add_subcommand_register_compression(CLI::App& app)
         ModelOptions model;
         double field_spacing = 1.0;
         bool replace = false;
+        std::string memory_limit = "auto";
     };
     auto o = std::make_shared<Options>();
     auto* sub = app.add_subcommand("register-compression", "Predict a tool compression with the model: deformed mesh (VTU), landmark "
@@ -156,12 +157,16 @@ void add_subcommand_register_compression(CLI::App& app)
     auto* params = sub->add_option("--parameters", o->parameters, "Parameter file from physreg estimate (else --variant/--k-* or defaults)");
     add_model_options(sub, o->model);
     sub->add_option("--field-spacing", o->field_spacing, "Voxel size of the displacement field over the mesh, mm (default 1)");
+    sub->add_option("--memory-limit", o->memory_limit, "With --solver condensed: memory the precomputation may take (factor, compliance), "
+                                                      "e.g. 8G; auto (default): 80 % of the physical memory. Over it: an error naming the size needed");
     sub->add_option("-o,--output", o->output, "Output directory (created)")->required();
     sub->add_flag("--force", o->replace, "Replace an existing output directory (only once the new one is complete)");
     sub->add_flag("--json", o->json, "Print a JSON summary on stdout");
     (void)params;
     sub->callback([o] {
         if (!(o->field_spacing > 0)) fail("--field-spacing must be > 0 mm (got {})", o->field_spacing);
+        CondensedContactOptions condensed_options;
+        condensed_options.memory_limit_bytes = parse_memory_limit(o->memory_limit, "--memory-limit");
         const LoadedModel loaded = load_model(o->dataset, o->parameters, o->model);
         const auto cases = compression_cases(loaded.dataset, {o->state});
         const LiverModel& model = loaded.model;
@@ -177,7 +182,7 @@ void add_subcommand_register_compression(CLI::App& app)
         CondensedPrecomputation condensed_pre;
         double condensed_ms = 0.0;
         const auto prediction = condensed ? predict_compression_condensed(model, cases[0].tool, rest_landmarks, 20, "compression " + o->state,
-                                                                          &condensed_pre, &condensed_ms)
+                                                                          condensed_options, &condensed_pre, &condensed_ms)
                                           : predict_compression(model, cases[0].tool, rest_landmarks, prediction_options(o->model),
                                                                 "compression " + o->state);
         // A tool that never reaches the model leaves it at rest: say so instead of a silent zero.
@@ -215,7 +220,9 @@ void add_subcommand_register_compression(CLI::App& app)
         if (condensed)
             summary["condensed"] = {{"law", "the model's Neo-Hookean tangent at rest (linear)"}, {"tool_updates", prediction.iterations},
                                     {"ms_per_update", condensed_ms}, {"candidate_nodes", condensed_pre.candidate_nodes},
-                                    {"precomputation_s", condensed_pre.assembly_s + condensed_pre.factorisation_s + condensed_pre.compliance_s}};
+                                    {"precomputation_s", condensed_pre.assembly_s + condensed_pre.factorisation_s + condensed_pre.compliance_s},
+                                    {"factor_nonzeros", condensed_pre.factor_nonzeros},
+                                    {"memory_bytes", condensed_pre.memory_bytes}, {"memory_limit_bytes", condensed_pre.memory_limit_bytes}};
         summary["command"] = "register-compression";
         summary["inputs"] = {{"dataset", fs::absolute(o->dataset).string()}, {"state", o->state}, {"parameters", o->parameters}};
         summary["tre_per_landmark"] = json::parse(tre_report_json(tre))["landmarks"];

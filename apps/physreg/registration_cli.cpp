@@ -2,12 +2,14 @@
 // Options and helpers shared by the commands that build the liver model.
 #include "registration_cli.hpp"
 
+
 #include "physreg/core/error.hpp"
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 #include "physreg/registration/compression/condensed_contact.hpp"
 
+#include <cmath>
 #include <sstream>
 
 namespace physreg::cli {
@@ -22,6 +24,28 @@ std::vector<std::string> split_names(const std::string& text, const std::string&
         if (!item.empty()) names.push_back(item);
     if (names.empty()) fail("{}: no state names in '{}'", option, text);
     return names;
+}
+
+std::size_t parse_memory_limit(const std::string& text, const std::string& option)
+{
+    if (text == "auto") return 0;
+    std::size_t used = 0;
+    double value = 0.0;
+    try {
+        value = std::stod(text, &used);
+    } catch (const std::exception&) {
+        used = 0;
+    }
+    const std::string suffix = text.substr(used);
+    double unit = 0.0;
+    if (suffix.empty()) unit = 1.0;
+    else if (suffix == "K" || suffix == "k") unit = 1024.0;
+    else if (suffix == "M") unit = 1024.0 * 1024.0;
+    else if (suffix == "G") unit = 1024.0 * 1024.0 * 1024.0;
+    else if (suffix == "T") unit = 1024.0 * 1024.0 * 1024.0 * 1024.0;
+    if (used == 0 || unit == 0.0 || !std::isfinite(value) || !(value > 0) || value * unit < 1.0 || value * unit > 1e18)
+        fail("{} must be auto or a positive size such as 8G, 512M or 1e9 (bytes; K, M, G, T are powers of 1024), got '{}'", option, text);
+    return static_cast<std::size_t>(value * unit);
 }
 
 void add_model_options(CLI::App* sub, ModelOptions& m)

@@ -18,6 +18,9 @@ namespace physreg::cli {
 
 /// "A,B,C" → {"A", "B", "C"}; Error naming `option` when empty.
 std::vector<std::string> split_names(const std::string& text, const std::string& option);
+/// --memory-limit: "auto" (0: 80 % of the physical memory) or a size in bytes with an optional
+/// binary suffix K, M, G or T (e.g. 8G = 8 GiB); Error naming `option` otherwise.
+std::size_t parse_memory_limit(const std::string& text, const std::string& option);
 
 struct ModelOptions {
     std::string variant = "coupled", region = "body", grid;

@@ -123,6 +123,7 @@ struct SymmetricSolver::Impl {
     bool analysed = false, factored = false;
     double last_shift = 0.0;
     Eigen::Index pattern_nnz = -1, pattern_rows = -1;
+    double factor_nonzeros = 0.0; ///< nnz(L) the analysis predicts
     std::vector<double> coordinates; ///< pcg-amg: node positions for the rigid rotations
 
     Impl()
@@ -138,7 +139,8 @@ struct SymmetricSolver::Impl {
         return shift;
     }
 
-    double factorise_here(const SparseMatrix& k)
+    // Symbolic analysis (ordering, supernodes), once per sparsity pattern.
+    void analyse_here(const SparseMatrix& k)
     {
         if (!analysed || k.nonZeros() != pattern_nnz || k.rows() != pattern_rows) {
             {
@@ -157,7 +159,13 @@ struct SymmetricSolver::Impl {
                             cholmod_ordering_name(method.ordering), method.lnz, method.fl * 1e-9);
             pattern_nnz = k.nonZeros();
             pattern_rows = k.rows();
+            factor_nonzeros = method.lnz;
         }
+    }
+
+    double factorise_here(const SparseMatrix& k)
+    {
+        analyse_here(k);
         factor.setShift(0.0);
         factor.factorize(k);
         if (factor.info() == Eigen::Success) {
@@ -235,6 +243,12 @@ LinearSolveStats SymmetricSolver::solve_factored(const Eigen::VectorXd& b, Eigen
 LinearSolveStats SymmetricSolver::solve_factored(const Eigen::MatrixXd& b, Eigen::MatrixXd& x)
 {
     return solve_with_factor(m_impl->factor, m_impl->factored, m_impl->pattern_rows, b, x);
+}
+
+double SymmetricSolver::analyse(const SparseMatrix& k)
+{
+    on_one_thread([&] { m_impl->analyse_here(k); });
+    return m_impl->factor_nonzeros;
 }
 
 bool SymmetricSolver::has_factor() const

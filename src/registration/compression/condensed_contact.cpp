@@ -3,6 +3,7 @@
 
 #include "physreg/core/error.hpp"
 #include "physreg/core/interrupt.hpp"
+#include "physreg/core/log.hpp"
 #include "physreg/mechanics/linear/linear_solver.hpp"
 #include "physreg/mechanics/implicit/stiffness_assembly.hpp"
 
@@ -10,7 +11,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <set>
+#include <unistd.h>
 
 namespace physreg {
 namespace {
@@ -26,6 +29,21 @@ double distance_to_segment(const Vec3& x, const Vec3& a, const Vec3& b)
     const double l2 = ab.squaredNorm();
     const double s = l2 > 0 ? std::clamp((x - a).dot(ab) / l2, 0.0, 1.0) : 0.0;
     return (x - (a + s * ab)).norm();
+}
+
+std::string memory_size(std::size_t bytes)
+{
+    const double mib = double(bytes) / 1048576.0;
+    return mib >= 1024.0 ? fmt::format("{:.2f} GiB", mib / 1024.0) : fmt::format("{:.1f} MiB", mib);
+}
+
+void refuse_over_limit(std::size_t needed, std::size_t limit, double factor_nonzeros, std::size_t dofs, std::size_t candidates, std::size_t queries)
+{
+    if (needed <= limit) return;
+    fail("condensed contact: the precomputation needs ≈ {} (Cholesky factor with {:.3g} non-zeros for {} dofs, compliance of {} "
+         "candidate and {} query nodes, stiffness, work blocks), over the memory limit of {} (--memory-limit): fewer candidates "
+         "(a smaller margin, fewer tool paths) or a coarser grid",
+         memory_size(needed), factor_nonzeros, dofs, candidates, queries, memory_size(limit));
 }
 
 } // namespace
@@ -56,6 +74,25 @@ std::vector<std::int32_t> nodes_near(const VolumeMesh& mesh, const std::vector<V
                 break;
             }
     return out;
+}
+
+std::size_t condensed_memory_bytes(std::size_t dofs, double factor_nonzeros, std::size_t stiffness_nonzeros, std::size_t candidate_nodes,
+                                   std::size_t query_nodes)
+{
+    const double c3 = 3.0 * double(candidate_nodes), q3 = 3.0 * double(query_nodes);
+    const double factor = 8.0 * factor_nonzeros;                        // L's values (supernodal; its indices are a few %)
+    const double stiffness = 12.0 * double(stiffness_nonzeros) + 4.0 * double(dofs);
+    const double compliance = 8.0 * c3 * (c3 + q3);
+    const double work = 2.0 * 8.0 * 48.0 * double(dofs);                // one block of right-hand sides and its solution
+    return static_cast<std::size_t>(factor + stiffness + compliance + work);
+}
+
+std::size_t effective_memory_limit(std::size_t memory_limit_bytes)
+{
+    if (memory_limit_bytes > 0) return memory_limit_bytes;
+    const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+    if (pages <= 0 || page <= 0) return std::numeric_limits<std::size_t>::max();
+    return static_cast<std::size_t>(0.8 * double(pages) * double(page));
 }
 
 CondensedContactModel::CondensedContactModel(const LiverModel& model, const std::vector<Indenter>& session_tools,
@@ -95,6 +132,7 @@ CondensedContactModel::CondensedContactModel(const LiverModel& model, const std:
                 break;
             }
         }
+        if (m_candidates.empty() || m_candidates.back() != n) m_outside.push_back(n);
     }
     if (m_candidates.empty()) fail("condensed contact: no surface node lies within the tools' reach (+{} mm) of their paths", options.candidate_margin_mm);
 
@@ -111,46 +149,79 @@ CondensedContactModel::CondensedContactModel(const LiverModel& model, const std:
         for (SparseMatrix::InnerIterator it(k, j); it; ++it)
             if (constrained[static_cast<std::size_t>(it.row())] || constrained[static_cast<std::size_t>(j)]) it.valueRef() = it.row() == j ? 1.0 : 0.0;
     m_pre.assembly_s = seconds_since(t0);
+    // The memory the precomputation will take, from CHOLMOD's analysis, before anything large is made.
+    const double analysed_nonzeros = m_factor->solver.analyse(k);
+    const std::size_t limit = effective_memory_limit(options.memory_limit_bytes);
+    const std::size_t needed = condensed_memory_bytes(dofs, analysed_nonzeros, static_cast<std::size_t>(k.nonZeros()), m_candidates.size(), m_query.size());
+    refuse_over_limit(needed, limit, analysed_nonzeros, dofs, m_candidates.size(), m_query.size());
     t0 = std::chrono::steady_clock::now();
     if (m_factor->solver.factorise(k).shift > 0)
         fail("condensed contact: the stiffness at rest is not positive definite (CHOLMOD needed a shift): is the model held against rigid motion?");
     m_pre.factorisation_s = seconds_since(t0);
 
-    // Compliance columns of the candidate dofs, a block of right-hand sides at a time.
+    m_pre.factor_nonzeros = analysed_nonzeros;
+    m_pre.memory_limit_bytes = limit;
+
+    // Compliance columns of the candidate dofs.
     t0 = std::chrono::steady_clock::now();
+    std::vector<std::int32_t> candidates;
+    candidates.swap(m_candidates);
+    m_query_u.assign(3 * m_query.size(), 0.0);
+    add_candidates(candidates);
+    m_pre.compliance_s = seconds_since(t0);
+    m_pre.dofs = dofs;
+    m_pre.query_nodes = m_query.size();
+}
+
+void CondensedContactModel::add_candidates(const std::vector<std::int32_t>& added)
+{
+    const std::size_t dofs = m_factor->constrained.size();
+    const auto& constrained = m_factor->constrained;
+    const auto old3 = static_cast<Eigen::Index>(3 * m_candidates.size());
+    const std::size_t needed = condensed_memory_bytes(dofs, m_pre.factor_nonzeros, static_cast<std::size_t>(m_factor->k.nonZeros()),
+                                                      m_candidates.size() + added.size(), m_query.size());
+    refuse_over_limit(needed, m_pre.memory_limit_bytes, m_pre.factor_nonzeros, dofs, m_candidates.size() + added.size(), m_query.size());
+    m_pre.memory_bytes = needed;
+    m_candidates.insert(m_candidates.end(), added.begin(), added.end());
     const auto c3 = static_cast<Eigen::Index>(3 * m_candidates.size()), q3 = static_cast<Eigen::Index>(3 * m_query.size());
-    m_wcc.setZero(c3, c3);
-    m_wqc.setZero(q3, c3);
+    m_wcc.conservativeResize(c3, c3);
+    m_wqc.conservativeResize(q3, c3);
+    auto dof_of = [](const std::vector<std::int32_t>& nodes, Eigen::Index i) {
+        return 3 * static_cast<std::size_t>(nodes[static_cast<std::size_t>(i / 3)]) + static_cast<std::size_t>(i % 3);
+    };
+    // The new columns, a block of right-hand sides at a time (BLAS-3 solves).
     constexpr Eigen::Index block = 48;
-    for (Eigen::Index b0 = 0; b0 < c3; b0 += block) {
+    for (Eigen::Index b0 = old3; b0 < c3; b0 += block) {
+        throw_if_interrupted();
         const Eigen::Index bs = std::min(block, c3 - b0);
         Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(dofs), bs);
         for (Eigen::Index j = 0; j < bs; ++j) {
-            const auto dof = 3 * static_cast<std::size_t>(m_candidates[static_cast<std::size_t>((b0 + j) / 3)]) + static_cast<std::size_t>((b0 + j) % 3);
+            const auto dof = dof_of(m_candidates, b0 + j);
             if (!constrained[dof]) rhs(static_cast<Eigen::Index>(dof), j) = 1.0;
         }
         Eigen::MatrixXd x;
         m_factor->solver.solve_factored(rhs, x);
         for (Eigen::Index j = 0; j < bs; ++j) {
             for (Eigen::Index i = 0; i < c3; ++i) {
-                const auto dof = 3 * static_cast<std::size_t>(m_candidates[static_cast<std::size_t>(i / 3)]) + static_cast<std::size_t>(i % 3);
+                const auto dof = dof_of(m_candidates, i);
                 m_wcc(i, b0 + j) = constrained[dof] ? 0.0 : x(static_cast<Eigen::Index>(dof), j);
             }
             for (Eigen::Index i = 0; i < q3; ++i) {
-                const auto dof = 3 * static_cast<std::size_t>(m_query[static_cast<std::size_t>(i / 3)]) + static_cast<std::size_t>(i % 3);
+                const auto dof = dof_of(m_query, i);
                 m_wqc(i, b0 + j) = constrained[dof] ? 0.0 : x(static_cast<Eigen::Index>(dof), j);
             }
         }
     }
-    m_pre.compliance_s = seconds_since(t0);
+    // The old candidates' rows of the new columns, by the symmetry of K⁻¹.
+    if (old3 > 0 && c3 > old3) m_wcc.block(old3, 0, c3 - old3, old3) = m_wcc.block(0, old3, old3, c3 - old3).transpose();
     m_least_compliance = 1e-12 * m_wcc.diagonal().maxCoeff();
-    m_pre.dofs = dofs;
     m_pre.candidate_nodes = m_candidates.size();
-    m_pre.query_nodes = m_query.size();
     m_pre.compliance_bytes = static_cast<std::size_t>(m_wcc.size() + m_wqc.size()) * sizeof(double);
-    m_force = Eigen::VectorXd::Zero(c3);
-    m_lambda.assign(m_candidates.size(), 0.0);
-    m_query_u.assign(static_cast<std::size_t>(q3), 0.0);
+    m_force.conservativeResize(c3);
+    m_force.tail(c3 - old3).setZero();
+    m_lambda.resize(m_candidates.size(), 0.0);
+    const std::set<std::int32_t> now(added.begin(), added.end());
+    std::erase_if(m_outside, [&](std::int32_t n) { return now.count(n) > 0; });
 }
 
 CondensedContactModel::~CondensedContactModel() = default;
@@ -158,11 +229,12 @@ CondensedContactModel::CondensedContactModel(CondensedContactModel&&) noexcept =
 
 CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& tool, const Vec3& position_mm)
 {
-    const auto start = std::chrono::steady_clock::now();
     Indenter t = tool;
     t.path = {position_mm};
-    const std::size_t c = m_candidates.size();
     Update up;
+
+    const auto contact_start = std::chrono::steady_clock::now();
+    std::size_t c = m_candidates.size(); // grows when the tool leaves the candidate region
 
     // Candidate displacements from the current forces (only the loaded columns contribute).
     std::vector<std::size_t> loaded;
@@ -178,8 +250,8 @@ CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& too
         if (m_lambda[j] > 0) loaded.push_back(j);
 
     Eigen::VectorXd u;
-    std::vector<Vec3> normal(c);
-    std::vector<double> gap(c);
+    std::vector<Vec3> normal;
+    std::vector<double> gap;
     auto gaps_at = [&](const Eigen::VectorXd& uc) {
         for (std::size_t i = 0; i < c; ++i) {
             const Vec3 x = m_model.mesh.nodes[static_cast<std::size_t>(m_candidates[i])] + uc.segment<3>(static_cast<Eigen::Index>(3 * i));
@@ -189,7 +261,39 @@ CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& too
             gap[i] = (x - s).dot(n); // signed: < 0 inside the tool
         }
     };
+    // A tool outside the precomputed region: surface nodes that are not candidates lie within its
+    // reach (+ the LCP's gap, + as far as the candidates have moved: nodes beyond them move less).
+    // Their compliance is solved now (the full solve), never skipped.
+    auto extend_region = [&](const Eigen::VectorXd& uc) {
+        if (m_outside.empty()) return false;
+        double moved = 0.0;
+        for (Eigen::Index i = 0; i < uc.size(); i += 3) moved = std::max(moved, uc.segment<3>(i).norm());
+        const double reach = t.reach_mm();
+        std::size_t reached = 0;
+        std::vector<std::int32_t> added;
+        for (const auto n : m_outside) {
+            const double d = (m_model.mesh.nodes[static_cast<std::size_t>(n)] - position_mm).norm();
+            if (d <= reach + m_options.active_gap_mm + moved) ++reached;
+            if (d <= reach + m_options.candidate_margin_mm + moved) added.push_back(n);
+        }
+        if (reached == 0) return false;
+        const auto t0 = std::chrono::steady_clock::now();
+        add_candidates(added);
+        up.added_candidates = static_cast<int>(added.size());
+        up.extension_ms = 1e3 * seconds_since(t0);
+        ++m_pre.region_extensions;
+        m_pre.added_candidates += added.size();
+        m_pre.extension_s += 1e-3 * up.extension_ms;
+        logger()->warn("condensed contact: the tool at ({:.1f}, {:.1f}, {:.1f}) mm left the precomputed candidate region ({} surface "
+                       "nodes within its reach were no candidates): {} nodes added by solves with the factor in {:.2f} s",
+                       position_mm.x(), position_mm.y(), position_mm.z(), reached, added.size(), 1e-3 * up.extension_ms);
+        return true;
+    };
     candidate_displacement(u);
+    if (extend_region(u)) candidate_displacement(u); // the new candidates carry no force yet
+    c = m_candidates.size();
+    normal.resize(c);
+    gap.resize(c);
     gaps_at(u);
 
     std::vector<std::size_t> set; // the LCP's candidates
@@ -290,7 +394,7 @@ CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& too
     up.total_force_n = total.norm();
     up.active_nodes = static_cast<int>(loaded.size());
     const auto contact_done = std::chrono::steady_clock::now();
-    up.contact_ms = 1e3 * std::chrono::duration<double>(contact_done - start).count();
+    up.contact_ms = 1e3 * std::chrono::duration<double>(contact_done - contact_start).count() - up.extension_ms;
 
     // The query nodes from the loaded columns.
     Eigen::VectorXd uq = Eigen::VectorXd::Zero(m_wqc.rows());
@@ -333,14 +437,15 @@ std::vector<double> CondensedContactModel::full_displacement_mm() const
 }
 
 CompressionPrediction predict_compression_condensed(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks, int steps,
-                                                    const std::string& what, CondensedPrecomputation* precomputation, double* ms_per_update)
+                                                    const std::string& what, const CondensedContactOptions& options,
+                                                    CondensedPrecomputation* precomputation, double* ms_per_update)
 {
     if (steps < 1) fail("{}: condensed contact needs ≥ 1 tool update (got {})", what, steps);
     if (tool.path.size() < 2) fail("{}: the tool needs a path from first contact to the final position", what);
     const auto start = std::chrono::steady_clock::now();
     CompressionPrediction out;
     try {
-        CondensedContactModel condensed(model, {tool}, {});
+        CondensedContactModel condensed(model, {tool}, {}, options);
         const Vec3 a = tool.path.front(), b = tool.path.back();
         double update_ms = 0.0;
         for (int s = 1; s <= steps; ++s) {

@@ -231,6 +231,8 @@ case_ enrich-apply-other-mesh "enrich apply" "database built for another mesh" "
 case_ bench-enrich-database "bench enrich" "truncated database" "truncated.phe" 1 "$o.json" -- bench enrich --dataset "$ph" --grid 6x5x3 --database "$W/truncated.phe" --states D -o "$o.json"
 case_ bench-condensed-steps "bench condensed" "--steps 0" "--steps must be" 1 "$o.json" -- bench condensed --dataset "$ph" --grid 6x5x3 --steps 0 -o "$o.json"
 case_ bench-condensed-state "bench condensed" "a state that is not a tool compression" "insufflation" 1 "$o.json" -- bench condensed --dataset "$ph" --grid 6x5x3 --states insufflation -o "$o.json"
+case_ bench-condensed-memory-syntax "bench condensed" "--memory-limit 8X" "--memory-limit must be auto or a positive size" 1 "$o.json" -- bench condensed --dataset "$ph" --grid 6x5x3 --memory-limit 8X -o "$o.json"
+case_ register-compression-memory-limit register-compression "--solver condensed over --memory-limit 1M" "over the memory limit" 1 "$o" -- register-compression --dataset "$ph" --grid 12x9x6 --state D --solver condensed --memory-limit 1M -o "$o"
 case_ demo-readonly demo "read-only output folder" "ro" 1 "$W/ro/demo" readonly -- demo --quick -o "$W/ro/demo"
 case_ demo-sigterm demo "SIGTERM mid-run" "interrupted by SIGTERM" 143 "$o" signal:TERM:5 -- demo --quick -o "$o"
 case_ cli-unknown-option "(any)" "unknown option" "--frobnicate" 109 "" -- mesh "$labels" -o "$o.vtu" --frobnicate

@@ -9,6 +9,7 @@
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/phantom/dataset.hpp"
+#include "physreg/core/error.hpp"
 #include "physreg/registration/compression/condensed_contact.hpp"
 #include "physreg/registration/compression/estimation.hpp"
 #include "physreg/registration/observation.hpp"
@@ -389,6 +390,63 @@ TEST(BodyModel, CondensedContactMatchesTheNonlinearModelForASmallTravel)
     EXPECT_LT(difference, 0.15 * largest) << difference << " mm vs the largest landmark motion " << largest << " mm";
     std::printf("condensed vs nonlinear at 1.5 mm: largest landmark motion %.4f mm, largest difference %.4f mm; %zu candidates, %d in contact\n",
                 largest, difference, condensed.precomputation().candidate_nodes, up.active_nodes);
+}
+
+TEST(BodyModel, ACondensedToolOffTheSessionPathsAddsItsNodesAndGivesTheFullAnswer)
+{
+    // Bad input of issue 30: a tool position outside the precomputed candidate region must not be
+    // answered from the stale block (its nodes would be pushed through). The model precomputed for
+    // B's path alone, moved along D's, adds the nodes D reaches (solves with the factor, a warning)
+    // and then answers as the model precomputed for both paths does.
+    const BodyDataset* d = body_dataset();
+    if (!d) GTEST_SKIP() << "PHYSREG_TEST_PHANTOM is not set (ctest's fixture.phantom_small sets it)";
+    const auto cases = compression_cases(d->dataset, {"B", "D"});
+    const LiverModel body = build_liver_model(d->labels, d->dataset.roles, coarse_body_model(), "small rest");
+    std::vector<Vec3> around;
+    for (const auto& l : d->rest) around.push_back(l.position);
+    const auto query = nodes_near(body.mesh, around, 2.0 * body.cell_size_mm.maxCoeff());
+    CondensedContactModel only_b(body, {cases[0].tool}, query);
+    CondensedContactModel both(body, {cases[0].tool, cases[1].tool}, query);
+    const std::size_t precomputed_b = only_b.precomputation().candidate_nodes;
+    ASSERT_GT(both.precomputation().candidate_nodes, precomputed_b) << "D's path must reach other skin nodes than B's";
+    const Indenter& tool = cases[1].tool;
+    const Vec3 direction = (tool.path.back() - tool.path.front()).normalized();
+    double largest = 0.0, difference = 0.0;
+    int added = 0;
+    for (int step = 1; step <= 3; ++step) {
+        const Vec3 at = tool.path.front() + 1.0 * step * direction;
+        const auto up = only_b.move_to(tool, at);
+        const auto reference = both.move_to(tool, at);
+        added += up.added_candidates;
+        if (step == 1) EXPECT_GT(up.added_candidates, 0) << "the first update off B's path adds D's nodes";
+        else EXPECT_EQ(up.added_candidates, 0) << "later updates nearby reuse them";
+        EXPECT_EQ(up.active_nodes, reference.active_nodes);
+        EXPECT_LE(up.max_penetration_mm, 1e-3);
+        for (std::size_t i = 0; i < only_b.query_displacement_mm().size(); ++i) {
+            largest = std::max(largest, std::abs(reference.active_nodes > 0 ? both.query_displacement_mm()[i] : 0.0));
+            difference = std::max(difference, std::abs(only_b.query_displacement_mm()[i] - both.query_displacement_mm()[i]));
+        }
+    }
+    EXPECT_EQ(only_b.precomputation().region_extensions, 1);
+    EXPECT_EQ(only_b.precomputation().added_candidates, static_cast<std::size_t>(added));
+    EXPECT_EQ(only_b.candidate_nodes().size(), precomputed_b + static_cast<std::size_t>(added));
+    EXPECT_GT(largest, 0.01);
+    EXPECT_LT(difference, 1e-6 * largest + 1e-9) << difference << " mm of " << largest;
+    std::printf("tool off the session's paths: %zu candidates precomputed for B, %d added for D; query nodes within %.3g mm of the model "
+                "precomputed for both (largest motion %.3f mm)\n",
+                precomputed_b, added, difference, largest);
+
+    // A memory budget below what the precomputation needs: an error naming both sizes.
+    CondensedContactOptions tight;
+    tight.memory_limit_bytes = 1u << 20;
+    try {
+        CondensedContactModel refused(body, {cases[0].tool}, query, tight);
+        ADD_FAILURE() << "a 1 MiB budget was accepted";
+    } catch (const Error& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find("over the memory limit of 1.0 MiB"), std::string::npos) << what;
+        EXPECT_NE(what.find("needs ≈"), std::string::npos) << what;
+    }
 }
 
 TEST(BodyModel, APartialLiverSurfaceCloudDrivesTheBodyModel)

@@ -60,6 +60,9 @@ public:
     /// Reference node positions (mm, 3 per node): pcg-amg builds the rigid rotations from them.
     void set_node_coordinates(std::vector<double> xyz);
 
+    /// The symbolic analysis of K's pattern alone (CHOLMOD's ordering; kept for the factorisation):
+    /// the non-zeros the Cholesky factor L will have, to size memory before factorising.
+    double analyse(const SparseMatrix& k);
     /// Factors K now (shifted if it is not positive definite), for later solve_factored calls.
     LinearSolveStats factorise(const SparseMatrix& k);
     /// Solves with the factor of the last factorised matrix (modified Newton: a stale tangent).

@@ -32,13 +32,32 @@ struct CondensedContactOptions {
     double lcp_tolerance_mm = 1e-5;    ///< largest complementarity violation |min(w, λ D_ii)|, mm
     int normal_updates = 4;            ///< re-linearisations of the normals and gaps per update
     double penetration_tolerance_mm = 1e-3; ///< accepted penetration after the last linearisation
+    /// Memory the precomputation may take, bytes: the Cholesky factor, the compliance blocks, the
+    /// stiffness, the solve's work blocks; estimated from CHOLMOD's analysis before anything is
+    /// factorised. 0: 80 % of the machine's physical memory. Over it: an Error naming both sizes.
+    std::size_t memory_limit_bytes = 0;
     void validate() const;
 };
+
+/// The memory a condensed model of this size needs (bytes, the estimate the limit is checked
+/// against): `factor_nonzeros` = nnz(L), `stiffness_nonzeros` = nnz(K).
+std::size_t condensed_memory_bytes(std::size_t dofs, double factor_nonzeros, std::size_t stiffness_nonzeros, std::size_t candidate_nodes,
+                                   std::size_t query_nodes);
+/// `memory_limit_bytes` as applied: itself, or 80 % of the physical memory when 0.
+std::size_t effective_memory_limit(std::size_t memory_limit_bytes);
 
 struct CondensedPrecomputation {
     std::size_t dofs = 0, candidate_nodes = 0, query_nodes = 0;
     double assembly_s = 0.0, factorisation_s = 0.0, compliance_s = 0.0;
     std::size_t compliance_bytes = 0;
+    double factor_nonzeros = 0.0;  ///< nnz(L)
+    std::size_t memory_bytes = 0;  ///< the estimate checked against the limit (factor, compliance, stiffness, work)
+    std::size_t memory_limit_bytes = 0;
+    /// Tool positions that left the candidate region: the surface nodes they reached were added
+    /// as candidates by solves with the factor (a fallback, with a warning).
+    int region_extensions = 0;
+    std::size_t added_candidates = 0;
+    double extension_s = 0.0;
 };
 
 class CondensedContactModel {
@@ -58,10 +77,18 @@ public:
         double max_penetration_mm = 0.0;
         double total_force_n = 0.0;  ///< |Σ λ n|
         double contact_ms = 0.0, recovery_ms = 0.0;
+        /// Surface nodes within the tool's reach that were not candidates: added by solves with
+        /// the factor before the contact (the fallback for a tool outside the precomputed region).
+        int added_candidates = 0;
+        double extension_ms = 0.0;
     };
     /// The tool (its shape, at its reference position `position_mm`) → contact forces and the
-    /// query nodes' displacements. Throws Error when the LCP does not converge or a penetration
-    /// beyond the tolerance remains (naming the update's position).
+    /// query nodes' displacements. A tool that reaches surface nodes outside the precomputed
+    /// candidates (it left the session's paths) is not answered from the stale block: the nodes
+    /// within its reach + the margin become candidates first, their compliance solved with the
+    /// factor (seconds, not milliseconds), with a warning naming the position. Throws Error when
+    /// the LCP does not converge, a penetration beyond the tolerance remains (naming the update's
+    /// position), or the added candidates would exceed the memory limit.
     Update move_to(const Indenter& tool, const Vec3& position_mm);
     /// Forget the contact forces (a new tool sequence starts from rest).
     void reset();
@@ -78,11 +105,16 @@ public:
     const std::vector<std::int32_t>& query_nodes() const { return m_query; }
 
 private:
+    /// Appends `added` to the candidates: their compliance columns by solves with the factor, the
+    /// old candidates' rows of them by symmetry. Checks the memory limit first.
+    void add_candidates(const std::vector<std::int32_t>& added);
+
     struct Factor;
     const LiverModel& m_model;
     CondensedContactOptions m_options;
     std::unique_ptr<Factor> m_factor;
     std::vector<std::int32_t> m_candidates, m_query;
+    std::vector<std::int32_t> m_outside; ///< free surface nodes that are not candidates (yet)
     Eigen::MatrixXd m_wcc; ///< compliance at candidate dofs (3c × 3c), mm/N
     Eigen::MatrixXd m_wqc; ///< query dofs × candidate dofs (3q × 3c), mm/N
     Eigen::VectorXd m_force; ///< 3c: the last contact forces (N)
@@ -98,8 +130,8 @@ private:
 /// `iterations` is the number of updates; `seconds` includes the precomputation. Throws Error as
 /// CondensedContactModel does (naming `what`) and for steps < 1.
 CompressionPrediction predict_compression_condensed(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks, int steps,
-                                                    const std::string& what, CondensedPrecomputation* precomputation = nullptr,
-                                                    double* ms_per_update = nullptr);
+                                                    const std::string& what, const CondensedContactOptions& options = {},
+                                                    CondensedPrecomputation* precomputation = nullptr, double* ms_per_update = nullptr);
 
 /// Nodes within `radius_mm` of any of `points` (rest positions), sorted.
 std::vector<std::int32_t> nodes_near(const VolumeMesh& mesh, const std::vector<Vec3>& points, double radius_mm);
