@@ -262,19 +262,18 @@ CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& too
         }
     };
     // A tool outside the precomputed region: surface nodes that are not candidates lie within its
-    // reach (+ the LCP's gap, + as far as the candidates have moved: nodes beyond them move less).
+    // reach + the LCP's gap at rest. (Along a session path that never happens: the margin exceeds
+    // the gap. Nodes move with the tissue, but those beyond the margin move less than the tool.)
     // Their compliance is solved now (the full solve), never skipped.
-    auto extend_region = [&](const Eigen::VectorXd& uc) {
+    auto extend_region = [&]() {
         if (m_outside.empty()) return false;
-        double moved = 0.0;
-        for (Eigen::Index i = 0; i < uc.size(); i += 3) moved = std::max(moved, uc.segment<3>(i).norm());
         const double reach = t.reach_mm();
         std::size_t reached = 0;
         std::vector<std::int32_t> added;
         for (const auto n : m_outside) {
             const double d = (m_model.mesh.nodes[static_cast<std::size_t>(n)] - position_mm).norm();
-            if (d <= reach + m_options.active_gap_mm + moved) ++reached;
-            if (d <= reach + m_options.candidate_margin_mm + moved) added.push_back(n);
+            if (d <= reach + m_options.active_gap_mm) ++reached;
+            if (d <= reach + m_options.candidate_margin_mm) added.push_back(n);
         }
         if (reached == 0) return false;
         const auto t0 = std::chrono::steady_clock::now();
@@ -290,7 +289,7 @@ CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& too
         return true;
     };
     candidate_displacement(u);
-    if (extend_region(u)) candidate_displacement(u); // the new candidates carry no force yet
+    if (extend_region()) candidate_displacement(u); // the new candidates carry no force yet
     c = m_candidates.size();
     normal.resize(c);
     gap.resize(c);
