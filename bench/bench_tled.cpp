@@ -7,6 +7,7 @@
 #include "physreg/mechanics/implicit/stiffness_assembly.hpp"
 #include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
+#include "physreg/core/openmp_wait.hpp"
 
 #include <benchmark/benchmark.h>
 #include <omp.h>
@@ -128,4 +129,8 @@ BENCHMARK(BM_Assembly)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTi
 BENCHMARK_TEMPLATE(BM_TledSteps, double)->ArgsProduct({{0, 1}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_TEMPLATE(BM_TledSteps, float)->ArgsProduct({{0, 1}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_IndentationEquilibrium)->Arg(2)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+// As the physreg program: idle OpenMP threads spin briefly (core/openmp_wait.hpp), unless
+// GOMP_SPINCOUNT or OMP_WAIT_POLICY is set (bench/shared_load.sh compares the policies).
+PHYSREG_OPENMP_SHORT_SPIN();
+
 BENCHMARK_MAIN();

@@ -4,10 +4,14 @@
 
 #include "physreg/core/error.hpp"
 #include "physreg/core/interrupt.hpp"
+#include "physreg/core/openmp_wait.hpp"
 
 #include <filesystem>
 #include <string>
 #include <iostream>
+
+// Idle OpenMP threads spin briefly, then give the core back (core/openmp_wait.hpp; issue 30 item 5).
+PHYSREG_OPENMP_SHORT_SPIN();
 
 int main(int argc, char** argv)
 {

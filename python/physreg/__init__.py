@@ -30,6 +30,11 @@ missing input, TypeError/ValueError for arrays of the wrong dtype or shape.
 import os as _os
 from pathlib import Path as _Path
 
+# Idle OpenMP threads spin briefly, then yield the core, as in the physreg program
+# (core/openmp_wait.hpp): libgomp reads this once, when the module below loads it.
+if "OMP_WAIT_POLICY" not in _os.environ:
+    _os.environ.setdefault("GOMP_SPINCOUNT", "1000")
+
 # Commands run in-process draw report.html with this package's report module.
 _os.environ.setdefault("PHYSREG_PYTHONPATH", str(_Path(__file__).resolve().parent.parent))
 

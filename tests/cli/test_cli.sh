@@ -37,6 +37,16 @@ expect_no_file() {
 
 expect_ok "--version" "$physreg" --version
 grep -q "physreg 0" "$work/out.txt" && pass || failed "--version prints the version"
+# Idle OpenMP threads spin briefly (core/openmp_wait.hpp): the program starts itself again with
+# GOMP_SPINCOUNT=1000 unless the user chose a policy. (ctest gives this script GOMP_SPINCOUNT=1000,
+# sparing each command its second start; these three runs clear it.)
+env -u GOMP_SPINCOUNT -u OMP_WAIT_POLICY OMP_DISPLAY_ENV=verbose "$physreg" --version >"$work/out.txt" 2>"$work/err.txt" &&
+  grep -q "GOMP_SPINCOUNT = '1000'" "$work/err.txt" && grep -q "physreg 0" "$work/out.txt" && pass || failed "idle OpenMP threads spin 1000 rounds by default"
+env -u OMP_WAIT_POLICY GOMP_SPINCOUNT=300000 OMP_DISPLAY_ENV=verbose "$physreg" --version >/dev/null 2>"$work/err.txt" &&
+  grep -q "GOMP_SPINCOUNT = '300000'" "$work/err.txt" && pass || failed "a GOMP_SPINCOUNT the user set is kept"
+env -u GOMP_SPINCOUNT OMP_WAIT_POLICY=passive OMP_DISPLAY_ENV=verbose "$physreg" --version >/dev/null 2>"$work/err.txt" &&
+  grep -q "OMP_WAIT_POLICY = 'PASSIVE'" "$work/err.txt" && ! grep -q "GOMP_SPINCOUNT = '1000'" "$work/err.txt" && pass ||
+  failed "OMP_WAIT_POLICY=passive is kept without a spin count of ours"
 expect_ok "--help" "$physreg" --help
 for sub in mesh coarsen info convert demo phantom estimate register-compression register-surface register-images evaluate "landmarks locate" "enrich build" "enrich apply" "bench enrich"; do
   expect_ok "$sub --help" "$physreg" $sub --help
