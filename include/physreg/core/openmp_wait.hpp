@@ -24,16 +24,17 @@
 #include <cstring>
 
 namespace physreg::detail {
-inline void openmp_short_spin(int, char** argv, char** envp)
+// Runs before libc's and the sanitizers' initializers: no allocation, no instrumented stack.
+__attribute__((no_sanitize("address", "undefined"))) inline void openmp_short_spin(int, char** argv, char** envp)
 {
+    static char setting[] = "GOMP_SPINCOUNT=1000";
+    static char* environment[4096];
     int count = 0;
     for (char** e = envp; e && *e; ++e) {
         if (std::strncmp(*e, "GOMP_SPINCOUNT=", 15) == 0 || std::strncmp(*e, "OMP_WAIT_POLICY=", 16) == 0) return;
-        ++count;
+        if (count + 2 >= 4096) return; // an environment this large keeps libgomp's default
+        environment[count++] = *e;
     }
-    static char setting[] = "GOMP_SPINCOUNT=1000";
-    char* environment[count + 2]; // NOLINT: no allocation before libc's initializer
-    for (int i = 0; i < count; ++i) environment[i] = envp[i];
     environment[count] = setting;
     environment[count + 1] = nullptr;
     execve("/proc/self/exe", argv, environment); // returns only on failure: go on as we are
