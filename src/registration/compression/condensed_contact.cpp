@@ -266,7 +266,7 @@ CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& too
     // the gap. Nodes move with the tissue, but those beyond the margin move less than the tool.)
     // Their compliance is solved now (the full solve), never skipped.
     auto extend_region = [&]() {
-        if (m_outside.empty()) return false;
+        if (m_outside.empty()) return;
         const double reach = t.reach_mm();
         std::size_t reached = 0;
         std::vector<std::int32_t> added;
@@ -275,7 +275,7 @@ CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& too
             if (d <= reach + m_options.active_gap_mm) ++reached;
             if (d <= reach + m_options.candidate_margin_mm) added.push_back(n);
         }
-        if (reached == 0) return false;
+        if (reached == 0) return;
         const auto t0 = std::chrono::steady_clock::now();
         add_candidates(added);
         up.added_candidates = static_cast<int>(added.size());
@@ -286,11 +286,10 @@ CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& too
         logger()->warn("condensed contact: the tool at ({:.1f}, {:.1f}, {:.1f}) mm left the precomputed candidate region ({} surface "
                        "nodes within its reach were no candidates): {} nodes added by solves with the factor in {:.2f} s",
                        position_mm.x(), position_mm.y(), position_mm.z(), reached, added.size(), 1e-3 * up.extension_ms);
-        return true;
     };
-    candidate_displacement(u);
-    if (extend_region()) candidate_displacement(u); // the new candidates carry no force yet
+    extend_region(); // first: the displacements and gaps below cover the added candidates too
     c = m_candidates.size();
+    candidate_displacement(u);
     normal.resize(c);
     gap.resize(c);
     gaps_at(u);
