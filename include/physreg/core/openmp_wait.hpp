@@ -15,7 +15,7 @@
 // installs the original environment. So PHYSREG_OPENMP_SHORT_SPIN() puts in .preinit_array a function
 // that, unless the user chose a policy (GOMP_SPINCOUNT or OMP_WAIT_POLICY set), executes the
 // program again at once with GOMP_SPINCOUNT=1000 added: the same process (pid, signals, files),
-// before any initializer ran, ≈ 6 ms (the dynamic loader's work). If /proc/self/exe cannot be
+// before any initializer ran; ≈ 50 ms more per start (loading its libraries again). If /proc/self/exe cannot be
 // executed it goes on with libgomp's default. Use it once, in the file with main(), of an
 // executable (a shared library's .preinit_array is ignored). The Python package sets the variable
 // before it loads the module.
