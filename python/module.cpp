@@ -4,6 +4,7 @@
 // physreg's memory layout (x fastest), so images and mesh nodes pass without copies where the
 // layout allows. Positions are mm in ITK's LPS space.
 #include "app.hpp"
+#include "bindings.hpp"
 #include "progress.hpp"
 
 #include "physreg/core/error.hpp"
@@ -38,87 +39,9 @@
 
 namespace py = pybind11;
 using namespace physreg;
+using namespace physreg::python;
 
 namespace {
-
-template <typename T>
-using CArray = py::array_t<T, py::array::c_style>;
-
-// ---- argument checks: TypeError for the wrong kind of object/dtype, ValueError for shapes --------
-
-void require_dtype(const py::array& a, const py::dtype& expected, const char* argument)
-{
-    if (!a.dtype().is(expected))
-        throw py::type_error(fmt::format("{}: expected dtype {}, got {}", argument, std::string(py::str(py::object(expected))), std::string(py::str(py::object(a.dtype())))));
-}
-
-void require_c_contiguous(const py::array& a, const char* argument)
-{
-    if (!(a.flags() & py::array::c_style))
-        throw py::value_error(fmt::format("{}: the array must be C-contiguous (use numpy.ascontiguousarray)", argument));
-}
-
-/// An (N, 3) float64 array of points, copied into Vec3s; ValueError naming `argument`.
-std::vector<Vec3> points_from(const py::array& a, const char* argument)
-{
-    require_dtype(a, py::dtype::of<double>(), argument);
-    if (a.ndim() != 2 || a.shape(1) != 3)
-        throw py::value_error(fmt::format("{}: expected shape (N, 3), got {}", argument, std::string(py::str(py::tuple(py::cast(std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim())))))));
-    const auto view = a.cast<CArray<double>>().unchecked<2>();
-    std::vector<Vec3> out(static_cast<std::size_t>(a.shape(0)));
-    for (py::ssize_t n = 0; n < a.shape(0); ++n) {
-        out[static_cast<std::size_t>(n)] = Vec3(view(n, 0), view(n, 1), view(n, 2));
-        if (!out[static_cast<std::size_t>(n)].allFinite()) throw py::value_error(fmt::format("{}: row {} is not finite", argument, n));
-    }
-    return out;
-}
-
-/// A view of a std::vector<Vec3> (N, 3) float64 owned by `owner`.
-py::array points_view(std::vector<Vec3>& points, py::handle owner)
-{
-    return py::array_t<double>({static_cast<py::ssize_t>(points.size()), py::ssize_t{3}}, {sizeof(Vec3), sizeof(double)},
-                               points.empty() ? nullptr : points.front().data(), owner);
-}
-
-// ---- images ---------------------------------------------------------------------------------------
-
-py::array volume_shape_check(const py::array& a, const char* argument)
-{
-    if (a.ndim() != 3) throw py::value_error(fmt::format("{}: expected a 3-D array indexed [z, y, x], got {} dimensions", argument, a.ndim()));
-    require_c_contiguous(a, argument);
-    return a;
-}
-
-ImageGeometry geometry_for(const py::array& a, const ImageGeometry& given, const char* argument)
-{
-    ImageGeometry g = given;
-    g.size = Index3{a.shape(2), a.shape(1), a.shape(0)};
-    g.validate(argument);
-    return g;
-}
-
-/// A uint16 array [z, y, x] and its geometry → a LabelVolume (copied).
-LabelVolume label_volume_from(const py::array& labels, const ImageGeometry& geometry)
-{
-    volume_shape_check(labels, "labels");
-    require_dtype(labels, py::dtype::of<std::uint16_t>(), "labels");
-    LabelVolume v;
-    v.geometry = geometry_for(labels, geometry, "geometry");
-    const auto* data = static_cast<const std::uint16_t*>(labels.data());
-    v.labels.assign(data, data + labels.size());
-    return v;
-}
-
-template <typename Image, typename Value>
-py::array image_array(Image&& image, std::vector<Value> Image::*values, int components)
-{
-    auto* owned = new Image(std::move(image));
-    py::capsule owner(owned, [](void* p) { delete static_cast<Image*>(p); });
-    const auto& g = owned->geometry;
-    std::vector<py::ssize_t> shape{g.size[2], g.size[1], g.size[0]};
-    if (components > 1) shape.push_back(components);
-    return py::array_t<Value>(shape, ((*owned).*values).data(), owner);
-}
 
 // ---- meshes ---------------------------------------------------------------------------------------
 
@@ -136,40 +59,6 @@ LandmarkSet landmarks_from(const std::vector<std::string>& names, const py::arra
     LandmarkSet set(p.size());
     for (std::size_t n = 0; n < p.size(); ++n) set[n] = {names[n], p[n], LandmarkType::unspecified};
     return set;
-}
-
-/// A cloud from numpy: points (N, 3) float64 mm, optional int32 labels (N,) (default 0) and normals (N, 3).
-LabelledPointCloud cloud_from(const py::array& points, const std::optional<py::array>& labels, const std::optional<py::array>& normals)
-{
-    LabelledPointCloud cloud;
-    cloud.points = points_from(points, "points");
-    if (cloud.points.empty()) throw py::value_error("points: the cloud has no point");
-    if (labels) {
-        require_dtype(*labels, py::dtype::of<std::int32_t>(), "labels");
-        if (labels->ndim() != 1 || static_cast<std::size_t>(labels->shape(0)) != cloud.points.size())
-            throw py::value_error(fmt::format("labels: expected shape ({},)", cloud.points.size()));
-        const auto* l = static_cast<const std::int32_t*>(labels->cast<CArray<std::int32_t>>().data());
-        cloud.labels.assign(l, l + cloud.points.size());
-    } else {
-        cloud.labels.assign(cloud.points.size(), 0);
-    }
-    if (normals) {
-        cloud.normals = points_from(*normals, "normals");
-        if (cloud.normals.size() != cloud.points.size()) throw py::value_error(fmt::format("normals: {} rows for {} points", cloud.normals.size(), cloud.points.size()));
-    }
-    return cloud;
-}
-
-/// A progress(fraction, message) callback for the library, called with the GIL held; Ctrl-C stops it.
-std::function<void(double, const std::string&)> progress_from(const std::optional<py::function>& progress)
-{
-    if (!progress) return {};
-    py::function callback = *progress;
-    return [callback](double fraction, const std::string& message) {
-        py::gil_scoped_acquire acquire;
-        callback(fraction, message);
-        if (PyErr_CheckSignals() != 0) throw py::error_already_set();
-    };
 }
 
 /// Tissues from {label: (young_modulus_pa, poisson_ratio)}; labels absent take paper 001's healthy liver (3.5 kPa, 0.45).
@@ -195,14 +84,32 @@ TissueTable tissues_from(const VolumeMesh& mesh, const std::optional<std::map<st
 
 /// mesh_from_labels' work: hexahedra from the voxels or a grid, or CGAL tetrahedra.
 VolumeMesh mesh_labels(const py::array& labels, const ImageGeometry& geometry, const std::string& kind, std::optional<std::array<int, 3>> grid,
-                       double cell_size_mm, double facet_distance_mm, std::optional<std::vector<std::int32_t>> only, unsigned seed)
+                       double cell_size_mm, double facet_distance_mm, std::optional<std::vector<std::int32_t>> only, unsigned seed,
+                       const std::vector<std::int32_t>& ignore = {}, const std::optional<std::map<std::int32_t, std::pair<double, double>>>& tissues = std::nullopt)
 {
-    const LabelVolume v = label_volume_from(labels, geometry);
+    LabelVolume v = label_volume_from(labels, geometry);
+    if (!ignore.empty())
+        for (auto& l : v.labels)
+            if (std::count(ignore.begin(), ignore.end(), static_cast<std::int32_t>(l))) l = 0; // ignored labels are background
     if (kind == "hex") {
         MeshingOptions o;
         if (grid) o.grid_dims = Index3{(*grid)[0], (*grid)[1], (*grid)[2]};
+        // The hexahedral mesher reads each label's tissue: the default table's, else the tissues
+        // given, else paper 001's healthy liver (Model.from_labels sets the moduli afterwards).
+        // Only the labels present, so that the mesher warns of no absent tissue.
+        const TissueTable defaults = default_tissue_table();
+        TissueTable table;
+        for (const auto label : std::set<std::uint16_t>(v.labels.begin(), v.labels.end())) {
+            if (label == 0) continue;
+            if (const Tissue* t = defaults.find(label); t && !(tissues && tissues->count(label))) {
+                table.tissues.push_back(*t);
+                continue;
+            }
+            const auto given = tissues && tissues->count(label) ? tissues->at(label) : std::pair<double, double>{3500.0, 0.45};
+            table.tissues.push_back({label, fmt::format("label {}", label), given.first, given.second, 1000.0, 0.0});
+        }
         py::gil_scoped_release release;
-        return mesh_label_volume(v, default_tissue_table(), o, "labels").mesh;
+        return mesh_label_volume(v, table, o, "labels").mesh;
     }
     if (kind == "tet") {
         if (!(cell_size_mm > 0) || !std::isfinite(cell_size_mm)) throw py::value_error(fmt::format("cell_size_mm: {} must be a positive number", cell_size_mm));
@@ -361,7 +268,10 @@ PYBIND11_MODULE(_physreg, m)
           "Reads a volume mesh (VTK XML .vtu or Gmsh .msh).");
     m.def("write_mesh", [](const std::filesystem::path& path, const VolumeMesh& mesh) { write_volume_mesh(path, mesh); }, py::arg("path"), py::arg("mesh"),
           "Writes a volume mesh (.vtu; .msh for Gmsh 4.1, .v2.msh for 2.2; atomically).");
-    m.def("mesh_from_labels", &mesh_labels, py::arg("labels"), py::arg("geometry"), py::arg("kind") = "hex", py::arg("grid") = py::none(), py::arg("cell_size_mm") = 6.0,
+    m.def("mesh_from_labels", [](const py::array& labels, const ImageGeometry& geometry, const std::string& kind, std::optional<std::array<int, 3>> grid,
+                                 double cell_size_mm, double facet_distance_mm, std::optional<std::vector<std::int32_t>> only, unsigned seed) {
+        return mesh_labels(labels, geometry, kind, grid, cell_size_mm, facet_distance_mm, only, seed);
+    }, py::arg("labels"), py::arg("geometry"), py::arg("kind") = "hex", py::arg("grid") = py::none(), py::arg("cell_size_mm") = 6.0,
           py::arg("facet_distance_mm") = 0.75, py::arg("labels_meshed") = py::none(), py::arg("seed") = 1u,
           "Meshes a label volume. kind='hex': uniform hexahedra straight from the voxels (paper 000), optionally "
           "coarsened to `grid` cells (i, j, k) over the labels' bounding box; kind='tet': conforming tetrahedra (CGAL Mesh_3), "
@@ -592,9 +502,9 @@ PYBIND11_MODULE(_physreg, m)
            "of surface_labels (default: the whole outer boundary), every region 0.")
         .def_static("from_labels", [](const py::array& labels, const ImageGeometry& geometry, const std::string& kind, std::optional<std::array<int, 3>> grid,
                                       double cell_size_mm, std::optional<std::map<std::int32_t, std::pair<double, double>>> tissues, const std::string& law,
-                                      std::optional<std::vector<std::int32_t>> surface_labels, unsigned seed) {
+                                      std::optional<std::vector<std::int32_t>> surface_labels, unsigned seed, std::optional<std::vector<std::int32_t>> ignore_labels) {
             Model model;
-            model.mesh = mesh_labels(labels, geometry, kind, grid, cell_size_mm, 0.75, std::nullopt, seed);
+            model.mesh = mesh_labels(labels, geometry, kind, grid, cell_size_mm, 0.75, std::nullopt, seed, ignore_labels ? *ignore_labels : std::vector<std::int32_t>{}, tissues);
             model.tissues = tissues_from(model.mesh, tissues);
             model.law = parse_material_law(law);
             const std::set<std::int32_t> keep = surface_labels ? std::set<std::int32_t>(surface_labels->begin(), surface_labels->end()) : std::set<std::int32_t>{};
@@ -603,8 +513,10 @@ PYBIND11_MODULE(_physreg, m)
             return model;
         }, py::arg("labels"), py::arg("geometry"), py::arg("kind") = "hex", py::arg("grid") = py::none(), py::arg("cell_size_mm") = 6.0,
            py::arg("tissues") = py::none(), py::arg("law") = "neo-hookean", py::arg("surface_labels") = py::none(), py::arg("seed") = 1u,
+           py::arg("ignore_labels") = py::none(),
            "A model meshed from a uint16 label array [z, y, x] as mesh_from_labels does (kind 'hex': grid hexahedra, which a Tool can "
-           "drive; 'tet': CGAL tetrahedra of cell_size_mm), then as from_mesh.")
+           "drive; 'tet': CGAL tetrahedra of cell_size_mm), then as from_mesh. Labels in ignore_labels are left out (background); "
+           "every other label needs no entry in physreg's tissue table: tissues gives its modulus, else 3.5 kPa.")
         .def("hold", [](Model& model, const std::vector<std::int32_t>& nodes, const std::string& directions, const std::string& name) {
             std::array<bool, 3> dofs{false, false, false};
             for (const char c : directions) {
@@ -653,12 +565,14 @@ PYBIND11_MODULE(_physreg, m)
                                model.supports.size(), model.surface.triangles.size());
         });
 
-    py::class_<ToolObservation>(m, "Tool", "A tracked tool's poses: the path of its reference point (sphere centre, box centre) from first contact to its last pose.")
+    py::class_<ToolObservation>(m, "Tool", "A tracked tool's poses: the path of its reference point (sphere centre, box centre) from first contact to its "
+                                          "last pose, or a single pose (the approach then runs along the skin's normal).")
         .def(py::init([](const py::array& path, double radius_mm, const std::string& shape) {
                  ToolObservation o;
                  o.tool.name = "tool";
                  o.tool.path = points_from(path, "path");
-                 if (o.tool.path.size() < 2) throw py::value_error("path: needs at least 2 poses (first contact, last)");
+                 if (o.tool.path.empty()) throw py::value_error("path: needs at least one pose");
+                 // One pose (a single tracked position): register() finds the approach along the skin's normal.
                  o.tool.shape = parse_indenter_shape(shape);
                  if (o.tool.shape != IndenterShape::sphere) throw py::value_error(fmt::format("shape: '{}': only 'sphere' is taken from Python yet", shape));
                  if (!(radius_mm > 0) || !std::isfinite(radius_mm)) throw py::value_error(fmt::format("radius_mm: {} must be a positive number", radius_mm));
@@ -691,12 +605,20 @@ PYBIND11_MODULE(_physreg, m)
             return dense_field(r.mesh, r.result.displacement_mm, geometry, spacing_mm);
         }, py::arg("geometry") = py::none(), py::arg("spacing_mm") = 2.0,
            "The dense field (float32 [z, y, x, 3], mm, LPS; 0 outside the model) on `geometry`, or on a grid of spacing_mm over the model → (array, ImageGeometry).")
-        .def("map_points", [mapped_points](const Registration& r, const py::array& points, double max_distance_mm) {
-            return mapped_points(r.mesh, r.result.displacement_mm, points, max_distance_mm);
-        }, py::arg("points"), py::arg("max_distance_mm") = 10.5, "Rest positions (N, 3) mm (landmarks, targets) carried by the displacement.");
+        .def("map_points", [](const Registration& r, const py::array& points, double max_distance_mm) {
+            // displace_points locates points in tetrahedra and in grid hexahedra (the tool mode's models).
+            Model located;
+            located.mesh = r.mesh;
+            const std::vector<Vec3> moved = displace_points(located, r.result.displacement_mm, points_from(points, "points"), max_distance_mm, "points");
+            py::array_t<double> out({static_cast<py::ssize_t>(moved.size()), py::ssize_t{3}});
+            for (std::size_t n = 0; n < moved.size(); ++n)
+                for (int a = 0; a < 3; ++a) out.mutable_at(static_cast<py::ssize_t>(n), a) = moved[n][a];
+            return out;
+        }, py::arg("points"), py::arg("max_distance_mm") = 10.5,
+           "Rest positions (N, 3) mm (landmarks, targets) carried by the displacement; tetrahedral and grid-hexahedral models alike.");
 
     m.def("register", [](const Model& model, const py::object& observation, double traction_ratio, double young_modulus_pa, int max_cycles,
-                         std::optional<py::function> progress) {
+                         std::optional<py::function> progress, double tool_speed) {
         Observation seen;
         if (py::isinstance<ToolObservation>(observation)) seen = observation.cast<ToolObservation>();
         else if (py::isinstance<CloudObservation>(observation)) seen = observation.cast<CloudObservation>();
@@ -706,16 +628,22 @@ PYBIND11_MODULE(_physreg, m)
         settings.cloud.traction_ratio = traction_ratio;
         settings.cloud.young_modulus_pa = young_modulus_pa;
         settings.segmentation.max_cycles = max_cycles;
+        // The command's --tool-speed check, named as Python names it.
+        if (!(tool_speed > 0 && tool_speed <= 0.5)) throw py::value_error(fmt::format("tool_speed: must lie in (0, 0.5] cell sizes per iteration (got {})", tool_speed));
+        settings.compression.tool_speed_per_cell = tool_speed;
         const auto report = progress_from(progress);
         Registration out{model.mesh, {}};
         py::gil_scoped_release release;
         out.result = register_model(model, seen, settings, report);
         return out;
     }, py::arg("model"), py::arg("observation"), py::arg("traction_ratio") = 0.5, py::arg("young_modulus_pa") = 0.0, py::arg("max_cycles") = 40,
-          py::arg("progress") = py::none(),
+          py::arg("progress") = py::none(), py::arg("tool_speed") = PredictionOptions{}.tool_speed_per_cell,
           "Registers `model` to what was seen, with the solver that observation needs: a Tool → equilibrium under the tool (paper 000, "
           "TLED); a Cloud → paper 001's annealed pair forces (traction_ratio × E, E = young_modulus_pa or the surface's softest tissue); "
-          "a Segmentation → paper 002's boundary-driven linear elasticity (max_cycles alternations). Returns a Registration.");
+          "a Segmentation → paper 002's boundary-driven linear elasticity (max_cycles alternations). tool_speed: the tool's largest travel per "
+          "relaxation iteration in cell sizes, as register-compression --tool-speed. Returns a Registration.");
+
+    bind_pipelines(m);
 
     m.def("run", [](const std::vector<std::string>& args, std::optional<py::function> progress) {
         struct Restore {

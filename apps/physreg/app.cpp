@@ -16,6 +16,9 @@ namespace physreg::cli {
 void build_app(CLI::App& app)
 {
     app.set_version_flag("--version", std::string("physreg ") + physreg::VERSION);
+    // Global options are taken after the subcommand too (`physreg register-surface … --no-report`):
+    // every subcommand made below inherits this and passes what it does not know to its parent.
+    app.fallthrough();
     auto log_level = std::make_shared<std::string>("info");
     auto quiet = std::make_shared<bool>(false);
     auto no_report = std::make_shared<bool>(false);
@@ -39,6 +42,7 @@ void build_app(CLI::App& app)
     add_subcommand_enrich(app);
     add_subcommand_bench(app);
     add_subcommand_demo(app);
+    add_subcommand_settings(app);
     app.parse_complete_callback([log_level, quiet, no_report] {
         set_html_reports(!*no_report);
         auto level = spdlog::level::from_str(*log_level);

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "physreg/image/image_geometry.hpp"
+#include "physreg/io/geometry_json.hpp"
 #include "physreg/mesh/components.hpp"
 #include "physreg/mesh/quality.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
@@ -36,8 +37,9 @@ void add_subcommand_register_images(CLI::App& app);
 void add_subcommand_evaluate(CLI::App& app);
 void add_subcommand_enrich(CLI::App& app);
 void add_subcommand_bench(CLI::App& app);
+void add_subcommand_settings(CLI::App& app);
 
-nlohmann::json to_json(const ImageGeometry& geometry);
+using physreg::to_json; ///< ImageGeometry (io/geometry_json.hpp)
 nlohmann::json to_json(const HexGrid& grid);
 nlohmann::json to_json(const MeshQuality& quality);
 nlohmann::json to_json(const ComponentReport& report);

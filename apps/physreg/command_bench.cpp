@@ -183,7 +183,7 @@ void add_subcommand_bench(CLI::App& app)
         std::string memory_limit = "auto";
     };
     auto co = std::make_shared<CondensedOptions>();
-    auto* cond = group->add_subcommand("condensed", "Time per update with condensed contact (issue 30): the model linearised and factorised "
+    auto* cond = group->add_subcommand("condensed", "Time per update with condensed contact: the model linearised and factorised "
                                                     "once at rest, the compliance of the skin nodes the tools can reach precomputed, a "
                                                     "contact problem on those nodes alone per update; TRE at the final depth");
     cond->add_option("--dataset", co->dataset, "Phantom dataset")->required();

@@ -304,7 +304,7 @@ void add_subcommand_demo(CLI::App& app)
                                     {"coarse-to-fine", "3.42 / 3.46 / 3.38 mm, 36.76 ms", 3.42, 3.46, 3.38, 36.76, {}, {}, {}},
                                     {"rigid (noisy surface landmarks)", "-", 0, 0, 0, 0, {}, {}, {}},
                                     {"landmarks left at rest", "-", 0, 0, 0, 0, {}, {}, {}},
-                                    {"condensed contact (issue 30)", "-", 0, 0, 0, 0, {}, {}, {}},
+                                    {"condensed contact", "-", 0, 0, 0, 0, {}, {}, {}},
                                     {"condensed coarse-to-fine", "-", 0, 0, 0, 0, {}, {}, {}}};
         json per_state;
         std::vector<CompressionCase> all_cases = train_cases;
@@ -498,6 +498,8 @@ void add_subcommand_demo(CLI::App& app)
                         {"seed", o->seed},
                         {"methods", table},
                         {"fitted", parameters_json(fit.fitted)},
+                        // The optimiser's start: a fitted value equal to it was not moved by the data.
+                        {"fit_start", fit.history.empty() ? json(nullptr) : parameters_json(fit.history.front().parameters)},
                         {"fit_at_bound", fit.at_bound},
                         {"fit_identifiability", [&] {
                              json j = json::object();

@@ -67,7 +67,7 @@ void add_subcommand_phantom(CLI::App& app)
     sub->add_option("--tool-axis", o->tool_axis, "Cylinder axis x,y,z (default 1,0,0)");
     sub->add_option("--tool-half-extents", o->tool_half_extents, "Box half extents x,y,z, mm (default 12,6,12)");
     sub->add_option("--insufflation-pa", o->insufflation_pa, "Pressure on the anterior organ surfaces, Pa (default 3 % of the parenchyma's E; 0: none)");
-    sub->add_option("--push-depth", o->push_depth, "Add the large local push (issue 32): a sphere pressed this far (mm, posterior) into the "
+    sub->add_option("--push-depth", o->push_depth, "Add the large local push: a sphere pressed this far (mm, posterior) into the "
                                                    "right lobe of the organs alone, seen as a sparse cloud over 90 % of the surface (default 0: none)");
     sub->add_option("--push-tool-radius", o->push_tool_radius, "--push-depth: the sphere's radius, mm (default 12.5)");
     sub->add_option("--push-points", o->push_points, "--push-depth: points in its sparse cloud (default 500)");

@@ -18,6 +18,12 @@ In memory (numpy arrays in, result objects out; no files):
     (paper 001), linear elasticity with adjoint L-BFGS for a segmentation (paper 002).
     SurfaceModel (from_labels, from_mesh), register_surface_cloud → SurfaceRegistration
     (.displacement, .field(), .map_points(), .plateaus): paper 001 with register-surface's defaults.
+    ImagePair (arrays, or from_dataset), register_image_pair → ImageRegistration (.field(), .summary,
+    .parameters, .landmarks): paper 002's whole pipeline, the very function register-images calls,
+    with the same settings (settings_spec('register-images'): keys, defaults, ranges, help).
+    PartialSurfaceCase (SurfaceModel + cloud arrays, or from_dataset), register_partial_surface →
+    PartialSurfaceRegistration (.displacement(), .field(case), .summary, .landmarks): paper 001's
+    whole pipeline, the function register-surface calls (settings_spec('register-surface')).
 
 The commands of the `physreg` program, run in this process with the same checks and messages,
 each returning the summary it wrote (a dict):
@@ -42,8 +48,12 @@ from ._physreg import (  # noqa: F401,E402
     Cloud,
     Error,
     ImageGeometry,
+    ImagePair,
+    ImageRegistration,
     Mesh,
     Model,
+    PartialSurfaceCase,
+    PartialSurfaceRegistration,
     Registration,
     Segmentation,
     Surface,
@@ -61,7 +71,10 @@ from ._physreg import (  # noqa: F401,E402
     read_mesh,
     read_surface,
     register,
+    register_image_pair,
+    register_partial_surface,
     register_surface_cloud,
+    settings_spec,
     tre,
     write_displacement_field,
     write_image,

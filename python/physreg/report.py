@@ -225,9 +225,20 @@ def parameters_vs_truth_section(summary, folder):
     at_bound = set(summary.get("fit_at_bound", []) or [])
     ident = summary.get("fit_identifiability", {}) or {}
 
-    def status(key):
+    start = summary.get("fit_start") if isinstance(summary.get("fit_start"), dict) else {}
+
+    def start_value(key):
+        value = start.get(key)
+        if value is None:
+            value = (start.get("young_modulus_pa") or {}).get(key)
+        return value if isinstance(value, (int, float)) else None
+
+    def status(key, model_key=None):
         if key not in free:
             return "fixed (literature)"
+        begun, now = start_value(model_key or key), (model.get(model_key) if model_key else fitted.get(key))
+        if begun and now and abs(math.log10(now / begun)) < 0.005:
+            return "at start, not moved by the data"
         s = "estimated"
         if key in at_bound:
             s += ", AT A BOUND"
@@ -242,7 +253,7 @@ def parameters_vs_truth_section(summary, folder):
                                   ("tumour E (Pa)", "tumour", "lesion", "tumour_young_pa"),
                                   ("vessel E (Pa)", "vessel", "vessel", "vessel_young_pa")):
         if key in model and tissue in truth:
-            rows.append((row, model[key], truth[tissue], status(est) if est else "fixed (literature)"))
+            rows.append((row, model[key], truth[tissue], status(est, key) if est else "fixed (literature)"))
     if "parenchyma" in model and "parenchyma" in truth:
         # Under displacement loading only the ratios are observable.
         for row, key, tissue in (("gel / parenchyma", "body", "body"), ("tumour / parenchyma", "tumour", "lesion"),
@@ -455,7 +466,7 @@ def displacement_section(folder):
 def dataset_of(summary):
     inputs = summary.get("inputs", {}) if isinstance(summary.get("inputs"), dict) else {}
     dataset = inputs.get("dataset") or summary.get("dataset")
-    state = inputs.get("state") or summary.get("state")
+    state = inputs.get("state") or inputs.get("pictured_state") or summary.get("state")
     return (Path(dataset) if dataset and Path(dataset).exists() else None), state
 
 
@@ -575,11 +586,11 @@ def build_report(folder, shown_as=None):
     import physreg
     command = summary.get("command") or ("demo" if isinstance(summary.get("methods"), list) else "register-compression")
     if command == "demo" and "inputs" not in summary and (folder / "phantom" / "manifest.json").exists():
-        # The demo's held-out compression D against its own phantom.
+        # The demo runs compressions A-E; its pictures show the held-out compression D.
         # The final folder's name, not the staging folder that the report is drawn in.
         dataset_folder = Path(shown_as) / "phantom" if shown_as else (folder / "phantom").resolve()
-        summary = dict(summary, inputs={"dataset": str(dataset_folder), "state": "D", "preset": summary.get("preset"),
-                                        "seed": summary.get("seed")})
+        summary = dict(summary, inputs={"dataset": str(dataset_folder), "states": "compressions A, B, C (training) and D, E (held out)",
+                                        "pictured_state": "D", "preset": summary.get("preset"), "seed": summary.get("seed")})
     sections = [
         key_value_table("Inputs", summary.get("inputs", {}) if isinstance(summary.get("inputs"), dict) else {}),
         key_value_table("Parameters", summary.get("parameters", {}) if isinstance(summary.get("parameters"), dict) else {}),

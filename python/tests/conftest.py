@@ -24,6 +24,13 @@ def program():
     return path
 
 
+def skip_or_fail(reason):
+    """Skips for want of a fixture, or fails in CI (CI=true), where every fixture must be there."""
+    if os.environ.get("CI") == "true":
+        pytest.fail(f"a fixture is missing in CI (a skip there is a failure): {reason}")
+    pytest.skip(reason)
+
+
 def program_error(program, *args):
     """Runs the program, expects exit 1, returns the message after 'physreg: error: '."""
     r = subprocess.run([program, *map(str, args)], capture_output=True, text=True)

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import physreg
+from conftest import skip_or_fail
 
 
 def block_labels():
@@ -20,7 +21,7 @@ def block_labels():
 def test_version_matches_the_program(program):
     import subprocess
     if program is None:
-        pytest.skip("no physreg program on PATH or in PHYSREG_EXECUTABLE")
+        skip_or_fail("no physreg program on PATH or in PHYSREG_EXECUTABLE")
     out = subprocess.run([program, "--version"], capture_output=True, text=True).stdout.strip()
     assert out == f"physreg {physreg.__version__}"
 

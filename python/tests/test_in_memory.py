@@ -130,3 +130,37 @@ def test_a_tool_drives_a_hexahedral_model_and_refuses_tetrahedra(model_and_cloud
         physreg.register(tetrahedra, "a cloud")
     with pytest.raises(ValueError, match="directions"):
         model.hold([0], directions="w")
+
+
+def test_a_single_tracked_pose_a_tool_speed_and_targets_in_hexahedra(dataset):
+    """Issue 43's paper cuts: one tracked pose is an observation (the approach runs along the skin's
+    normal), the tool speed is a setting, map_points works on the tool mode's hexahedra, and labels
+    outside physreg's default table mesh when their tissue is given."""
+    labels, geometry = physreg.read_labels(dataset / "rest" / "labels.nii.gz")
+    liver = np.where(np.isin(labels, [2, 3, 4]), 7, 0).astype(np.uint16)  # label 7: in no default table
+    liver[0, 0, 0] = 9  # a stray voxel of a label the user leaves out
+    model = physreg.Model.from_labels(liver, geometry, kind="hex", grid=(12, 9, 6), tissues={7: (3500.0, 0.45)}, ignore_labels=[9])
+    assert model.tissues == {7: (3500.0, 0.45)}
+    model.hold(model.surface_nodes_facing((0.0, 1.0, 0.0)))
+    nodes = model.mesh.nodes
+    front = nodes[np.argmin(nodes[:, 1])]
+    radius = 10.0
+    end = front + np.array([0.0, 6.0 - radius, 0.0])
+    two = physreg.register(model, physreg.Tool(np.array([end - [0.0, 6.0, 0.0], end]), radius_mm=radius))
+    one = physreg.register(model, physreg.Tool(np.array([end]), radius_mm=radius))
+    assert "one pose" in one.notes
+    u1, u2 = np.linalg.norm(one.displacement, axis=1), np.linalg.norm(two.displacement, axis=1)
+    assert 3.0 < u2.max() < 7.0
+    # The same final pose, approached along the normal: the same equilibrium to the solver's tolerance.
+    assert np.max(np.abs(one.displacement - two.displacement)) < 0.05, np.max(np.abs(one.displacement - two.displacement))
+    # A pose clear of the skin touches nothing.
+    clear = physreg.register(model, physreg.Tool(np.array([front - [0.0, 2 * radius, 0.0]]), radius_mm=radius))
+    assert np.abs(clear.displacement).max() == 0.0
+    slow = physreg.register(model, physreg.Tool(np.array([end - [0.0, 6.0, 0.0], end]), radius_mm=radius), tool_speed=0.005)
+    assert np.max(np.abs(slow.displacement - two.displacement)) < 0.05
+    with pytest.raises(ValueError, match="tool_speed"):
+        physreg.register(model, physreg.Tool(np.array([end]), radius_mm=radius), tool_speed=0.0)
+    # Targets in grid hexahedra: a node's rest position lands on its displaced position.
+    node = int(np.argmax(u2))
+    moved = two.map_points(nodes[node:node + 1].copy())
+    assert np.allclose(moved[0], nodes[node] + two.displacement[node], atol=1e-9)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import physreg
+from conftest import skip_or_fail
 from physreg import report
 
 
@@ -74,7 +75,7 @@ def load_in_chromium(page, png):
 
 def test_report_opens_in_chromium_without_console_errors(registered, tmp_path):
     if chromium() is None:
-        pytest.skip("Chromium is not installed (Debian package chromium): the page was not loaded in a browser")
+        skip_or_fail("Chromium is not installed (Debian package chromium): the page was not loaded in a browser")
     # The check can see console errors: a page that logs one is caught.
     control = tmp_path / "control.html"
     control.write_text('<!DOCTYPE html><html><body><script>console.error("control error")</script></body></html>')

@@ -91,6 +91,29 @@ TreReport pool_tre(const std::vector<TreReport>& reports)
 
 std::string tre_stats_json(const TreReport& report) { return report_stats(report).dump(); }
 
+json tre_summary(const TreReport& report)
+{
+    // The median over exactly the landmarks the group's statistics count (compute_tre's grouping:
+    // internal = tumour and vessel; untyped landmarks count in "all" only). An empty group has no
+    // median: null, never a number copied from another group.
+    const auto group = [&](const TreStats& s, bool (*member)(LandmarkType)) {
+        std::vector<double> e;
+        for (const auto& entry : report.entries)
+            if (member(entry.type)) e.push_back(entry.error_mm);
+        if (e.size() != s.count) fail("TRE summary: {} landmarks in a group whose statistics count {}", e.size(), s.count);
+        std::sort(e.begin(), e.end());
+        json median = nullptr;
+        if (!e.empty()) median = e.size() % 2 ? e[e.size() / 2] : 0.5 * (e[e.size() / 2 - 1] + e[e.size() / 2]);
+        return json{{"count", s.count}, {"mean_mm", s.mean_mm}, {"median_mm", median}, {"max_mm", s.max_mm}, {"std_mm", s.std_mm}};
+    };
+    json per = json::object();
+    for (const auto& e : report.entries) per[e.name] = e.error_mm;
+    return {{"all", group(report.all, [](LandmarkType) { return true; })},
+            {"surface", group(report.surface, [](LandmarkType t) { return t == LandmarkType::surface; })},
+            {"internal", group(report.internal, [](LandmarkType t) { return is_internal(t); })},
+            {"per_landmark_mm", per}};
+}
+
 std::string tre_report_json(const TreReport& report)
 {
     json j = report_stats(report);

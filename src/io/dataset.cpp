@@ -47,6 +47,7 @@ PhantomDataset read_phantom_dataset(const fs::path& directory)
         d.roles.bone = r.at("bone").get<std::set<std::int32_t>>();
         d.roles.kidney = r.at("kidney").get<std::set<std::int32_t>>();
         d.tissues_file = m.at("tissues_file").get<std::string>();
+        d.material_set = m.value("material_set", std::string("paper000"));
         for (const auto& s : m.at("states")) {
             DatasetState state;
             state.name = s.at("name").get<std::string>();

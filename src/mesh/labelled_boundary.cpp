@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/mesh/labelled_boundary.hpp"
 
+#include "physreg/core/error.hpp"
 #include "physreg/mesh/faces.hpp"
 
 #include <algorithm>
@@ -64,6 +65,79 @@ BoundarySurface liver_boundary(const VolumeMesh& mesh, const std::function<bool(
             s.node_feature[q] = feature_anterior_margin;
     }
     return s;
+}
+
+void LabelledTriangles::validate(std::size_t node_count, const std::string& what) const
+{
+    if (triangles.size() != labels.size()) fail("{}: {} triangles but {} labels", what, triangles.size(), labels.size());
+    if (triangles.empty()) fail("{}: no surface triangles", what);
+    for (std::size_t t = 0; t < triangles.size(); ++t) {
+        for (auto v : triangles[t])
+            if (v < 0 || static_cast<std::size_t>(v) >= node_count)
+                fail("{}: triangle {} has node {} outside the model's {} nodes", what, t, v, node_count);
+        if (labels[t] < 0) fail("{}: triangle {} has negative label {}", what, t, labels[t]);
+    }
+}
+
+LabelledTriangles labelled_triangles(const VolumeMesh& mesh, std::optional<double> notch_x_mm)
+{
+    const BoundarySurface b = liver_boundary(mesh, [](std::int32_t) { return true; }, notch_x_mm);
+    LabelledTriangles out;
+    out.triangles = b.triangles;
+    out.labels.reserve(b.triangles.size());
+    const auto feature = [&](std::int32_t node) {
+        const auto q = std::lower_bound(b.nodes.begin(), b.nodes.end(), node) - b.nodes.begin();
+        return b.node_feature[static_cast<std::size_t>(q)];
+    };
+    // A triangle takes a feature carried by at least two of its corners (the notch first).
+    for (const auto& t : b.triangles) {
+        int notch = 0, margin = 0;
+        for (auto n : t) {
+            const auto f = feature(n);
+            notch += f == feature_umbilical_notch;
+            margin += f == feature_anterior_margin || f == feature_umbilical_notch;
+        }
+        out.labels.push_back(notch >= 2 ? feature_umbilical_notch : margin >= 2 ? feature_anterior_margin : feature_none);
+    }
+    return out;
+}
+
+std::vector<std::int32_t> surface_nodes_facing(const VolumeMesh& mesh, const LabelledTriangles& surface, const Vec3& direction, double cosine)
+{
+    std::vector<Vec3> normal(mesh.node_count(), Vec3::Zero());
+    for (const auto& t : surface.triangles) {
+        const Vec3 area = 0.5 * (mesh.nodes[t[1]] - mesh.nodes[t[0]]).cross(mesh.nodes[t[2]] - mesh.nodes[t[0]]);
+        for (auto n : t) normal[static_cast<std::size_t>(n)] += area;
+    }
+    std::vector<std::int32_t> out;
+    for (std::size_t n = 0; n < normal.size(); ++n)
+        if (normal[n].norm() > 0 && normal[n].normalized().dot(direction) > cosine) out.push_back(static_cast<std::int32_t>(n));
+    return out;
+}
+
+std::vector<std::int32_t> surface_nodes_near(const VolumeMesh& mesh, const LabelledTriangles& surface, const std::vector<Vec3>& points, double radius_mm)
+{
+    if (!(radius_mm > 0) || !std::isfinite(radius_mm)) fail("support radius {} mm must be > 0", radius_mm);
+    std::vector<std::uint8_t> on(mesh.node_count(), 0);
+    for (const auto& t : surface.triangles)
+        for (auto n : t) on[static_cast<std::size_t>(n)] = 1;
+    std::vector<std::int32_t> out;
+    for (std::size_t n = 0; n < on.size(); ++n) {
+        if (!on[n]) continue;
+        for (const auto& p : points)
+            if ((mesh.nodes[n] - p).norm() <= radius_mm) {
+                out.push_back(static_cast<std::int32_t>(n));
+                break;
+            }
+    }
+    return out;
+}
+
+LabelledTriangles unlabelled_boundary(const VolumeMesh& mesh)
+{
+    LabelledTriangles out = labelled_triangles(mesh, std::nullopt);
+    std::fill(out.labels.begin(), out.labels.end(), feature_none);
+    return out;
 }
 
 } // namespace physreg

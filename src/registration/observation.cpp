@@ -4,10 +4,32 @@
 #include "physreg/core/error.hpp"
 #include "physreg/mesh/coarsen.hpp"
 #include "physreg/mesh/point_location.hpp"
+#include "physreg/mesh/triangle_search.hpp"
 
 #include <chrono>
 
 namespace physreg {
+
+Indenter with_approach_path(const Model& model, Indenter tool)
+{
+    if (tool.path.size() != 1) return tool;
+    if (tool.shape != IndenterShape::sphere) fail("tool '{}': a single pose needs a sphere to find its approach (give the path from first contact)", tool.name);
+    if (model.surface.triangles.empty()) fail("tool '{}': a single pose needs the model's surface to find its approach", tool.name);
+    const TriangleSearch search(model.mesh.nodes, model.surface.triangles);
+    const Vec3 pose = tool.path.front();
+    const ClosestTriangle nearest = search.closest(pose);
+    const auto& t = model.surface.triangles[static_cast<std::size_t>(nearest.triangle)];
+    const Vec3& a = model.mesh.nodes[static_cast<std::size_t>(t[0])];
+    const Vec3 normal = (model.mesh.nodes[static_cast<std::size_t>(t[1])] - a).cross(model.mesh.nodes[static_cast<std::size_t>(t[2])] - a).normalized();
+    // Clear of the skin: no contact, the tool stays where it is. Else it came in along the normal
+    // from where it first touched the skin point nearest its pose.
+    if ((pose - nearest.point).dot(normal) >= tool.radius_mm) {
+        tool.path = {pose, pose};
+        return tool;
+    }
+    tool.path = {nearest.point + tool.radius_mm * normal, pose};
+    return tool;
+}
 
 ModelRegistration register_model(const Model& model, const Observation& observation, const ModelRegistrationSettings& settings,
                                  const std::function<void(double, const std::string&)>& progress)
@@ -19,7 +41,15 @@ ModelRegistration register_model(const Model& model, const Observation& observat
         out.solver = settings.compression.method == StaticMethod::newton ? "TLED, Newton to equilibrium" : "TLED, dynamic relaxation to equilibrium";
         const LiverModel prepared = compression_model(model, "compression mode");
         if (progress) progress(0.0, "compression: equilibrium under the tool");
-        out.displacement_mm = predict_compression(prepared, tool->tool, {}, settings.compression, "the tool observation").displacement_mm;
+        const Indenter path = with_approach_path(model, tool->tool);
+        if (tool->tool.path.size() == 1 && path.path.front() == path.path.back()) {
+            // One pose clear of the skin: nothing touches the model.
+            out.notes = "one pose, clear of the skin: no contact";
+            out.displacement_mm.assign(3 * model.mesh.node_count(), 0.0);
+        } else {
+            if (tool->tool.path.size() == 1) out.notes = "one pose: the tool came in along the skin's normal from where it first touched it";
+            out.displacement_mm = predict_compression(prepared, path, {}, settings.compression, "the tool observation").displacement_mm;
+        }
     } else if (const auto* cloud = std::get_if<CloudObservation>(&observation)) {
         out.mode = "surface";
         out.solver = "co-rotational backward Euler under annealed pair forces";

@@ -59,14 +59,14 @@ if [ "$part" != datasets ]; then
 # The main job on the built-in phantom.
 expect_ok "demo --quick" "$physreg" --log-level warn demo --quick -o "$work/demo"
 grep -q "coarse-to-fine" "$work/out.txt" && grep -q "paper 000" "$work/out.txt" && pass || failed "demo prints the TRE table beside paper 000"
-python3 - "$work/demo/summary.json" <<'PY' && pass || failed "demo: condensed rows (issue 30) timed; condensed contact's held-out TRE below the landmarks at rest"
+python3 - "$work/demo/summary.json" <<'PY' && pass || failed "demo: condensed rows timed; condensed contact's held-out TRE below the landmarks at rest"
 import json, math, sys
 rows = {m["method"]: m for m in json.load(open(sys.argv[1]))["methods"]}
 rest = rows["landmarks left at rest"]["tre_held_out"]["all"]["mean_mm"]
-for name in ("condensed contact (issue 30)", "condensed coarse-to-fine"):
+for name in ("condensed contact", "condensed coarse-to-fine"):
     assert rows[name]["ms_per_update"] > 0 and math.isfinite(rows[name]["tre_held_out"]["all"]["mean_mm"]), rows[name]
 # Coarse-to-fine on the small preset stays near the landmarks at rest (docs/registration.md): not asserted.
-assert rows["condensed contact (issue 30)"]["tre_held_out"]["all"]["mean_mm"] < rest, (rows["condensed contact (issue 30)"], rest)
+assert rows["condensed contact"]["tre_held_out"]["all"]["mean_mm"] < rest, (rows["condensed contact"], rest)
 PY
 for f in summary.json $html params.json enrichment.phe figures/tre.png figures/difference_D.png figures/slices_E_coarse_to_fine.png \
          registration/D_fine.vtu registration/E_homogeneous.vtu registration/D_landmarks_coarse_to_fine.csv phantom/manifest.json; do
@@ -79,7 +79,9 @@ if [ -n "$html" ] && command -v chromium >/dev/null; then
   grep -q ':CONSOLE' "$work/chromium.txt" && { failed "demo report.html logs to the console:"; grep ':CONSOLE' "$work/chromium.txt"; } || pass
   [ "$(stat -c %s "$work/demo_report.png" 2>/dev/null || echo 0)" -gt 50000 ] && pass || failed "demo report.html screenshot missing or blank"
 else
-  echo "SKIPPED: demo report.html in Chromium (no Python package in this build, or Debian package chromium is not installed)"
+  # In CI every fixture must be there: a skip is a failure (issue 43).
+  [ "${CI:-}" = true ] && failed "demo report.html not opened in Chromium in CI (no Python package, or chromium missing)" ||
+    echo "SKIPPED: demo report.html in Chromium (no Python package in this build, or Debian package chromium is not installed)"
 fi
 for f in labels.nii.gz tissues.yaml landmarks.csv landmarks.mrk.json landmarks.fcsv mesh_voxels.vtu \
          mesh_fine.vtu mesh_coarse.vtu surfaces_fine.ply boundary_fine.stl tetrahedra_fine.vtu; do
@@ -249,7 +251,7 @@ grep -q '"method": "rigid"' "$work/rs2/summary.json" && pass || failed "register
 expect_error "register-surface: output exists" "not empty" "$physreg" $rs --dataset "$ph" --visible 50 -o "$work/rs"
 python3 -c "import json,sys; p=json.load(open(sys.argv[1]))['methods']['biomechanical']['plateaus']; assert all('last_step_rms_mm' in x for x in p)" "$work/rs/summary.json" \
   && pass || failed "register-surface summary: plateaus report their last step's rms motion"
-expect_error "register-surface: rms plateau fraction outside [0, 1]" "plateau rms fraction 2 must lie in [0, 1]" "$physreg" $rs --dataset "$ph" --visible 50 \
+expect_error "register-surface: rms plateau fraction outside [0, 1]" "--plateau-rms-fraction 2 must be in [0, 1]" "$physreg" $rs --dataset "$ph" --visible 50 \
   --plateau-rms-fraction 2 -o "$work/rs_bad_rms"
 expect_no_file "$work/rs_bad_rms"
 expect_error "register-surface: visible fraction not in the dataset" "no partial surface with 30 % visible" "$physreg" $rs --dataset "$ph" -o "$work/rs_bad1"
@@ -409,6 +411,33 @@ def walk(node):
 walk(json.load(open(sys.argv[1])))
 PY
 expect_ok "register-images: the written field reads back" "$physreg" info "$work/ri/displacement.nii.gz"
+# The default register-images run, judged (issue 43): on the large local push (3.2 mm mean TRE at
+# rest; the insufflation pair above barely moves) the biomechanical answer must beat the landmarks at
+# rest by a margin and improve the liver's and the tumour's Dice (measured 2026-11-28: TRE 1.95 mm
+# against 3.23; Dice liver 0.93 → 0.97).
+expect_ok "register-images with its defaults on the push" "$physreg" --log-level warn register-images --dataset "$work/push" --state push \
+  -o "$work/ri_push" --no-report
+python3 - "$work/ri_push/summary.json" <<'PY' && pass || failed "register-images defaults on the push: TRE ≤ 0.7× at rest, liver and tumour Dice improved"
+import json, sys
+s = json.load(open(sys.argv[1]))
+rest, bio = s["methods"]["at_rest"], s["methods"]["biomechanical"]
+assert bio["tre"]["all"]["mean_mm"] <= 0.7 * rest["tre"]["all"]["mean_mm"], (bio["tre"]["all"], rest["tre"]["all"])
+assert bio["dice"]["2"] >= rest["dice"]["2"] + 0.02 and bio["dice"]["3"] >= rest["dice"]["3"] + 0.15, (bio["dice"], rest["dice"])
+assert s["settings"]["cycles"] == 40 and s["settings"]["rms_tolerance"] == 0.001 and s["settings"]["baselines"] == "all", s["settings"]
+assert all(m.get("status") == "ok" for m in s["methods"].values()), {k: m.get("status") for k, m in s["methods"].items()}
+PY
+expect_no_file "$work/ri_push/report.html"
+# The settings specification: printed, as JSON, and a settings file with a misspelt key.
+expect_ok "settings register-images" "$physreg" settings register-images
+grep -q "rms_tolerance" "$work/out.txt" && grep -q -- "--rms-tolerance" "$work/out.txt" && pass || failed "settings register-images lists keys and options"
+expect_ok "settings register-surface --json" "$physreg" settings register-surface --json
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['d90']['default'] == 5.0 and d['support']['choices'] == ['posterior', 'none']" "$work/out.txt" \
+  && pass || failed "settings register-surface --json is the specification"
+expect_error "settings: unknown mode" "mode 'register-everything' has no settings specification" "$physreg" settings register-everything
+printf 'cycles: 4\ncel_size: 8\n' > "$work/typo.yaml"
+expect_error "register-images: a misspelt key in --settings" "unknown key 'cel_size'" "$physreg" $ri --dataset "$ph" --settings "$work/typo.yaml" -o "$work/ri_typo"
+grep -q "did you mean 'cell_size'" "$work/err.txt" && pass || failed "a misspelt settings key names the nearest one"
+expect_no_file "$work/ri_typo"
 # A label map edited with Python's standard library: a label removed, or the image moved away.
 edit_nifti() { # IN OUT MODE(remove:LABEL | shift:MM)
   python3 - "$@" <<'PY'

@@ -56,14 +56,17 @@ while IFS= read -r f; do
   case "$f" in
     */report.html) continue ;;
     */summary.json)
-      python3 - "$work/t1/$f" "$work/t2/$f" "$ref_root" "$work/t2" <<'PY' || { echo "FAILED: $f differs from the reference run"; failures=$((failures + 1)); }
+      python3 - "$work/t1/$f" "$work/t2/$f" "$ref_root" "$work/t2" "$mode" <<'PY' || { echo "FAILED: $f differs from the reference run"; failures=$((failures + 1)); }
 import json, math, sys
 # The runs' own folders appear in input paths: compare them as one.
 a, b = (json.loads(open(p).read().replace(d, "RUN")) for p, d in ((sys.argv[1], sys.argv[3]), (sys.argv[2], sys.argv[4])))
-bad = []
+bad, added = [], []
+# Against a recording, the new build may add keys (a summary that says more), never drop or change one.
+may_add = len(sys.argv) > 5 and sys.argv[5] == "--against"
 def walk(x, y, path, loose):
     if isinstance(x, dict):
-        if not isinstance(y, dict) or set(x) != set(y): bad.append(path); return
+        if not isinstance(y, dict) or not set(x) <= set(y) or (set(x) != set(y) and not may_add): bad.append(path); return
+        added.extend(f"{path}/{k}" for k in sorted(set(y) - set(x)))
         for k in x:
             if k.endswith("seconds") or k.endswith("_s"): continue
             walk(x[k], y[k], f"{path}/{k}", loose or k.startswith(("rigid_", "demons_")))
@@ -74,7 +77,8 @@ def walk(x, y, path, loose):
         if not math.isclose(x, y, rel_tol=1e-9, abs_tol=1e-12): bad.append(path)
     elif x != y: bad.append(path)
 walk(a, b, "", False)
-if bad: print("  differing:", ", ".join(bad[:10])); sys.exit(1)
+if added: print(f"  {sys.argv[2].split('/t2/')[-1]}: keys added:", ", ".join(added[:10]))
+if bad: print("  differing:", ", ".join(bad[:10]) or "(the top level's keys)"); sys.exit(1)
 PY
       ;;
     *) cmp -s "$work/t1/$f" "$work/t2/$f" || { echo "FAILED: $f differs from the reference run"; failures=$((failures + 1)); } ;;

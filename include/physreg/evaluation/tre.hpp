@@ -5,6 +5,8 @@
 // per type; CSV/JSON reports and a PNG chart.
 #include "physreg/core/landmark.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -41,6 +43,9 @@ LandmarkSet rigid_landmark_registration(const LandmarkSet& rest, const LandmarkS
 
 std::string tre_stats_json(const TreReport& report);               ///< {"all": {...}, "surface": …}
 std::string tre_report_json(const TreReport& report);              ///< stats plus per-landmark rows
+/// The registration summaries' TRE block: per group (all, surface, internal) count, mean, median,
+/// max and std in mm (an empty group's median is null), and every landmark's error by name.
+nlohmann::json tre_summary(const TreReport& report);
 void write_tre_csv(const std::filesystem::path& path, const TreReport& report); ///< atomic
 
 } // namespace physreg

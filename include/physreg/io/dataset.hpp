@@ -41,6 +41,9 @@ struct PhantomDataset {
     std::string ground_truth_element;              ///< e.g. "linear tetrahedra (CGAL Mesh_3), Mooney-Rivlin"
     LabelRoles roles;
     std::string tissues_file;                      ///< relative: the ground-truth model's tissue table
+    /// The literature material set the truth's moduli were drawn around (paper000, healthy,
+    /// cirrhotic): registrations start from it, never from the truth's values.
+    std::string material_set = "paper000";
     std::vector<DatasetState> states;              ///< rest first
     const DatasetState& state(const std::string& name) const; ///< throws Error if absent
     std::filesystem::path path(const std::string& relative) const { return directory / relative; }

@@ -14,7 +14,7 @@
 #include "physreg/mesh/volume_mesh.hpp"
 #include "physreg/model/loads.hpp"
 #include "physreg/model/tissue_table.hpp"
-#include "physreg/registration/surface/surface_matching.hpp"
+#include "physreg/mesh/labelled_boundary.hpp"
 
 #include <functional>
 #include <memory>

@@ -21,7 +21,8 @@
 
 namespace physreg {
 
-/// The tool moved from its first contact (path.front()) to its last pose (path.back()).
+/// The tool moved from its first contact (path.front()) to its last pose (path.back()). A single
+/// tracked pose is an observation too: see with_approach_path.
 struct ToolObservation {
     Indenter tool;
 };
@@ -55,6 +56,11 @@ struct ModelRegistration {
 /// model with coupled tissues).
 ModelRegistration register_model(const Model& model, const Observation& observation, const ModelRegistrationSettings& settings = {},
                                  const std::function<void(double, const std::string&)>& progress = {});
+
+/// A one-pose sphere's path: in along the outward normal of the model's surface point nearest the
+/// pose, from where the sphere first touched it (a pose clear of the surface stays put). Paths of
+/// two or more poses are returned as they are. Throws Error for another shape or a model without surface.
+Indenter with_approach_path(const Model& model, Indenter tool);
 
 /// Rest points carried by a model's nodal displacement (interpolated in the cell that holds each
 /// point). Throws Error naming `what` for a point farther than `max_distance_mm` from the mesh.

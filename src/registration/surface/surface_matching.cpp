@@ -9,18 +9,6 @@
 
 namespace physreg {
 
-void LabelledTriangles::validate(std::size_t node_count, const std::string& what) const
-{
-    if (triangles.size() != labels.size()) fail("{}: {} triangles but {} labels", what, triangles.size(), labels.size());
-    if (triangles.empty()) fail("{}: no surface triangles", what);
-    for (std::size_t t = 0; t < triangles.size(); ++t) {
-        for (auto v : triangles[t])
-            if (v < 0 || static_cast<std::size_t>(v) >= node_count)
-                fail("{}: triangle {} has node {} outside the model's {} nodes", what, t, v, node_count);
-        if (labels[t] < 0) fail("{}: triangle {} has negative label {}", what, t, labels[t]);
-    }
-}
-
 void MatchingOptions::validate() const
 {
     if (!(distance_fraction > 0 && distance_fraction <= 1)) fail("matching: distance fraction d_t = {} must be in (0, 1]", distance_fraction);

@@ -102,7 +102,10 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
     const int plateaus = plateau_count(options.schedules);
     std::vector<double> x(n), forces(n), stiffness(n), previous(n);
     std::vector<SurfacePair> pairs;
-    for (int plateau = 0; plateau < plateaus; ++plateau) {
+    // The state at the end of the last plateau that completed: what is kept when a later plateau's
+    // forces fold an element (issue 46: numerical trouble backs the method off, it never ends the run).
+    std::vector<double> last_good(n, 0.0);
+    for (int plateau = 0; plateau < plateaus && result.stopped.empty(); ++plateau) {
         const auto plateau_start = std::chrono::steady_clock::now();
         PlateauReport report;
         report.plateau = plateau;
@@ -139,10 +142,16 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
             integrator.set_external_stiffness(stiffness);
             previous = u;
             const BackwardEulerStep s = integrator.step();
-            if (s.inverted_elements > 0)
-                fail("surface registration: {} element(s) of the model inverted at plateau {} (stiffness {:.3g} N); the forces are too "
-                     "strong for this material: lower the traction ratio or raise d90",
-                     s.inverted_elements, plateau, report.stiffness_n.begin()->second);
+            if (s.inverted_elements > 0) {
+                result.inverted_elements = s.inverted_elements;
+                result.stopped = fmt::format("{} element(s) of the model inverted at plateau {} of {} (stiffness {:.3g} N, step {}): the forces are too "
+                                             "strong for this material there; the annealing stopped and the result of {} is kept (lower the traction "
+                                             "ratio or raise d90 to go further)",
+                                             s.inverted_elements, plateau + 1, plateaus, report.stiffness_n.begin()->second, report.steps + 1,
+                                             plateau == 0 ? std::string("the rest state") : fmt::format("plateau {}", plateau));
+                logger()->warn("surface registration: {}", result.stopped);
+                break;
+            }
             ++report.steps;
             ++result.steps;
             result.newton_iterations += s.newton_iterations;
@@ -172,11 +181,12 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
                         report.matching.pruned_distance, report.matching.pruned_normal, report.matching.mean_distance_mm, report.last_step_mm,
                         report.last_step_rms_mm, report.seconds);
         result.plateaus.push_back(report);
+        if (result.stopped.empty()) last_good = integrator.displacement_mm();
         if (progress)
             progress(static_cast<double>(plateau + 1) / plateaus,
                      fmt::format("plateau {}/{}, mean pair distance {:.2f} mm", plateau + 1, plateaus, report.matching.mean_distance_mm));
     }
-    result.displacement_mm = integrator.displacement_mm();
+    result.displacement_mm = result.stopped.empty() ? integrator.displacement_mm() : last_good;
     for (std::size_t i = 0; i < n; ++i) x[i] = rest[i] + result.displacement_mm[i];
     pairs = matcher.match(x, cloud, options.matching);
     mark_used(pairs, matcher.source(), result.node_used);

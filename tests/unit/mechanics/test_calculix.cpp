@@ -21,7 +21,7 @@ using namespace test;
 
 TEST(MechanicsCalculix, IndentedBlockMatchesCalculix)
 {
-    if (!calculix_available()) GTEST_SKIP() << "ccx (Debian calculix-ccx) is not installed";
+    if (!calculix_available()) PHYSREG_MISSING_FIXTURE("ccx (Debian calculix-ccx) is not installed");
     const int n = 12, nz = 6;
     const double depth = 0.6; // mm, 10 % of the thickness
     const VolumeMesh mesh = block_mesh(n, n, nz, 1.0);

@@ -101,7 +101,7 @@ TEST(MooneyRivlin, ExplicitSolversRefuseItAndBadFractionsAreRefused)
 
 TEST(MooneyRivlin, GroundTruthDiscretisationMatchesCalculix)
 {
-    if (!calculix_available()) GTEST_SKIP() << "ccx (Debian calculix-ccx) is not installed";
+    if (!calculix_available()) PHYSREG_MISSING_FIXTURE("ccx (Debian calculix-ccx) is not installed");
     nlohmann::json ranges;
     const TissueTable tissues = draw_ground_truth_tissues(MaterialSet::paper000, phantom_label_roles(), {0, 1, 2, 3, 4, 5, 6}, 7, ranges);
     test::TempDir dir;

@@ -322,7 +322,7 @@ ModelParameters coarse_body_model()
 TEST(BodyModel, TheToolOnTheSkinMovesTheLiverTowardTheTruth)
 {
     const BodyDataset* d = body_dataset();
-    if (!d) GTEST_SKIP() << "PHYSREG_TEST_PHANTOM is not set (ctest's fixture.phantom_small sets it)";
+    if (!d) PHYSREG_MISSING_FIXTURE("PHYSREG_TEST_PHANTOM is not set (ctest's fixture.phantom_small sets it)");
     const auto cases = compression_cases(d->dataset, {"B"});
     const LiverModel body = build_liver_model(d->labels, d->dataset.roles, coarse_body_model(), "small rest");
     // Supports as in the image: the bone cells' nodes held, the flat base on the table (y only).
@@ -352,7 +352,7 @@ TEST(BodyModel, TheToolOnTheSkinMovesTheLiverTowardTheTruth)
 TEST(BodyModel, CondensedContactMatchesTheNonlinearModelForASmallTravel)
 {
     const BodyDataset* d = body_dataset();
-    if (!d) GTEST_SKIP() << "PHYSREG_TEST_PHANTOM is not set (ctest's fixture.phantom_small sets it)";
+    if (!d) PHYSREG_MISSING_FIXTURE("PHYSREG_TEST_PHANTOM is not set (ctest's fixture.phantom_small sets it)");
     const auto cases = compression_cases(d->dataset, {"B"});
     const LiverModel body = build_liver_model(d->labels, d->dataset.roles, coarse_body_model(), "small rest");
     // The tool 1.5 mm past first contact: small strains, where the linearised model must agree with
@@ -399,7 +399,7 @@ TEST(BodyModel, ACondensedToolOffTheSessionPathsAddsItsNodesAndGivesTheFullAnswe
     // B's path alone, moved along D's, adds the nodes D reaches (solves with the factor, a warning)
     // and then answers as the model precomputed for both paths does.
     const BodyDataset* d = body_dataset();
-    if (!d) GTEST_SKIP() << "PHYSREG_TEST_PHANTOM is not set (ctest's fixture.phantom_small sets it)";
+    if (!d) PHYSREG_MISSING_FIXTURE("PHYSREG_TEST_PHANTOM is not set (ctest's fixture.phantom_small sets it)");
     const auto cases = compression_cases(d->dataset, {"B", "D"});
     const LiverModel body = build_liver_model(d->labels, d->dataset.roles, coarse_body_model(), "small rest");
     std::vector<Vec3> around;
@@ -457,7 +457,7 @@ TEST(BodyModel, APartialLiverSurfaceCloudDrivesTheBodyModel)
     // cloud is the ground truth's (Mooney–Rivlin tetrahedra, another model); the landmarks are
     // judged against it and never seen.
     const BodyDataset* d = body_dataset();
-    if (!d) GTEST_SKIP() << "PHYSREG_TEST_PHANTOM is not set (ctest's fixture.phantom_small sets it)";
+    if (!d) PHYSREG_MISSING_FIXTURE("PHYSREG_TEST_PHANTOM is not set (ctest's fixture.phantom_small sets it)");
     const auto cases = compression_cases(d->dataset, {"B"});
     const LiverModel body = build_liver_model(d->labels, d->dataset.roles, coarse_body_model(), "small rest");
     const auto& roles = d->dataset.roles;

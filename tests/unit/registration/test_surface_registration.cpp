@@ -596,3 +596,43 @@ TEST(SurfaceModel, RegionsGrowAlongTheSurfaceFromPickedPoints)
 }
 
 } // namespace physreg
+
+namespace physreg {
+
+TEST(SurfaceRegistration, ForcesThatInvertElementsBackTheMethodOffInsteadOfEndingTheRun)
+{
+    // Issue 46: a plateau whose forces fold an element is numerical trouble, not bad input. The
+    // annealing stops, the last completed plateau's state is kept, and the result says where: here a
+    // cloud pulled 25 mm off the surface with a pair stiffness 1000× paper 001's folds the soft
+    // ellipsoid's elements under the patch.
+    const SurfaceModel& model = ellipsoid_model();
+    const LabelledPointCloud cloud = anterior_cloud(model, [](const Vec3& p) { return Vec3(p + Vec3(0.0, -25.0, 0.0)); });
+    const SurfaceMatcher matcher(unlabelled_boundary(model.mesh), model.mesh.node_count(), "ellipsoid");
+    TledOptions tled;
+    tled.law = MaterialLaw::corotational;
+    const TledModel fem(model.mesh, homogeneous_liver_tissues(3500.0), tled);
+    SurfaceRegistrationOptions options;
+    options.schedules = paper001_schedules(1000.0 * pair_stiffness_n(0.5, 3500.0, mean_point_spacing_mm(cloud.points)));
+    options.matching.distance_fraction = 1.0;
+    options.fixed_nodes = surface_nodes_facing(model.mesh, unlabelled_boundary(model.mesh), Vec3::UnitY(), 0.5);
+    SurfaceRegistrationResult r;
+    ASSERT_NO_THROW(r = register_surface_biomechanical(fem, matcher, cloud, options));
+    ASSERT_FALSE(r.stopped.empty()) << "the test needs forces that fold elements";
+    EXPECT_GT(r.inverted_elements, 0u);
+    EXPECT_NE(r.stopped.find("inverted at plateau"), std::string::npos) << r.stopped;
+    EXPECT_NE(r.stopped.find("is kept"), std::string::npos) << r.stopped;
+    ASSERT_EQ(r.displacement_mm.size(), 3 * model.mesh.node_count());
+    for (const double v : r.displacement_mm) ASSERT_TRUE(std::isfinite(v));
+    // The kept state is the last completed plateau's: no element of it is inverted.
+    std::vector<Vec3> x(model.mesh.node_count());
+    for (std::size_t n = 0; n < x.size(); ++n) x[n] = model.mesh.nodes[n] + Vec3(r.displacement_mm[3 * n], r.displacement_mm[3 * n + 1], r.displacement_mm[3 * n + 2]);
+    for (std::size_t c = 0; c < model.mesh.cell_count(); ++c) {
+        const auto cell = model.mesh.cell(c);
+        const Vec3 a = x[cell[1]] - x[cell[0]], b = x[cell[2]] - x[cell[0]], d = x[cell[3]] - x[cell[0]];
+        const Vec3 a0 = model.mesh.nodes[cell[1]] - model.mesh.nodes[cell[0]], b0 = model.mesh.nodes[cell[2]] - model.mesh.nodes[cell[0]],
+                   d0 = model.mesh.nodes[cell[3]] - model.mesh.nodes[cell[0]];
+        ASSERT_GT(a.dot(b.cross(d)) * a0.dot(b0.cross(d0)), 0.0) << "cell " << c << " inverted in the kept state";
+    }
+}
+
+} // namespace physreg

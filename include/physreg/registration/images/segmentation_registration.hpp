@@ -116,7 +116,8 @@ struct SegmentationRegistrationOptions {
     double relative_tolerance = 1e-3;
     /// Also stop when a cycle lowers the rms distance of the data term by less than this, mm (0:
     /// off): late cycles lower Φ by more than the relative tolerance while the boundary hardly moves.
-    double rms_tolerance_mm = 0.0;
+    /// 0.001 mm: register-images' default (ImageRegistrationSettings), so that every route agrees.
+    double rms_tolerance_mm = 0.001;
     bool estimate_moduli = true;
     /// Log-normal prior on the estimated moduli around their initial values (the tissue table), as
     /// issue 28 asks: Π = ½ N r² Σ_j (ln(E_j/E_j⁰) / ln f)², N the objective's terms. f (> 1; 0 =

@@ -22,16 +22,9 @@
 #include <string>
 #include <vector>
 
-namespace physreg {
+#include "physreg/mesh/labelled_boundary.hpp"
 
-/// The source side of the matching: surface triangles over the model's node ids and a feature
-/// label per triangle (SurfaceFeature: 0 surface, 1 umbilical notch, 2 anterior margin).
-struct LabelledTriangles {
-    std::vector<std::array<std::int32_t, 3>> triangles;
-    std::vector<std::int32_t> labels;
-    /// Throws Error naming `what` for mismatched sizes, node ids outside [0, node_count) or negative labels.
-    void validate(std::size_t node_count, const std::string& what) const;
-};
+namespace physreg {
 
 struct MatchingOptions {
     double distance_fraction = 0.9; ///< d_t: keep pairs with d < d_t × the largest pair distance (of that match)

@@ -48,17 +48,6 @@ struct RegionSeed {
 LabelledTriangles regions_from_seeds(const VolumeMesh& mesh, const LabelledTriangles& boundary, const std::vector<RegionSeed>& seeds, double radius_mm,
                                      double max_snap_mm, const std::string& what);
 
-/// Boundary nodes whose area-weighted rest normal points along `direction` (cosine > `cosine`):
-/// the support `register-surface --support posterior` holds.
-std::vector<std::int32_t> surface_nodes_facing(const VolumeMesh& mesh, const LabelledTriangles& surface, const Vec3& direction, double cosine);
-
-/// Boundary nodes within `radius_mm` of any of `points` (a support picked as points: ligaments, the
-/// vena cava). Throws Error for a radius ≤ 0.
-std::vector<std::int32_t> surface_nodes_near(const VolumeMesh& mesh, const LabelledTriangles& surface, const std::vector<Vec3>& points, double radius_mm);
-
-/// The boundary of a tetrahedral mesh, every triangle "surface" (0).
-LabelledTriangles unlabelled_boundary(const VolumeMesh& mesh);
-
 /// Regions from a labelled surface in the same space (a PLY with per-vertex "label"/"feature", or
 /// per-face labels: the inside label): each boundary triangle takes the label at the closest point of
 /// `regions` to its centroid (vertex labels: of the closest corner). Throws Error naming `what` when

@@ -90,11 +90,16 @@ struct SurfaceRegistrationResult {
     int newton_iterations = 0;
     double seconds = 0.0;
     double matching_s = 0.0, force_s = 0.0, assembly_s = 0.0, factorisation_s = 0.0, solve_s = 0.0; ///< where the time went
+    /// Empty when every plateau ran; else why the annealing stopped early (elements inverted by a
+    /// plateau's forces) and which plateau's result is kept.
+    std::string stopped;
+    std::size_t inverted_elements = 0; ///< in the step that stopped it
 };
 
 /// `progress(fraction, message)` after every plateau. Throws Error for bad options, a cloud label
-/// without schedule or model region, a cloud with no pair left after pruning, a non-converging time
-/// step, and a model that inverts elements (naming the plateau).
+/// without schedule or model region, a cloud with no pair left after pruning and a non-converging
+/// time step. A plateau whose forces invert elements is numerical trouble, not bad input: the
+/// annealing stops, the last completed plateau's state is returned and `stopped` says why (issue 46).
 SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
                                                          const SurfaceRegistrationOptions& options,
                                                          const std::function<void(double, const std::string&)>& progress = {});

@@ -1,0 +1,131 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+#pragma once
+// Paper 001's pipeline, whole (issue 43): the one function that `physreg register-surface` and
+// Python's physreg.register_partial_surface call. Read top to bottom in partial_surface_registration.cpp:
+//   1. the model: co-rotational tetrahedra, and for the heterogeneous kind Glisson's capsule
+//      (membrane) and the vessels (embedded beams);
+//   2. the supports: posterior surface, picked points, regions, node ids;
+//   3. the methods: labelled rigid and plain ICP (multi-start, supports judge plausibility), the
+//      biomechanical registration (arctan pair forces annealed, backward Euler), and the adjoint
+//      method when asked;
+//   4. evaluation: fit to the cloud, strain energy, implied rigid motion, Hausdorff distance, TRE
+//      and nodal error when a truth is given, and whether the data determine the pose.
+// The settings are PartialSurfaceSettings, specified once by partial_surface_spec().
+#include "physreg/core/settings_spec.hpp"
+#include "physreg/core/landmark.hpp"
+#include "physreg/image/image_geometry.hpp"
+#include "physreg/io/point_cloud.hpp"
+#include "physreg/mesh/surface_mesh.hpp"
+#include "physreg/io/vessel_centrelines.hpp"
+#include "physreg/mesh/tetrahedral_meshing.hpp"
+#include "physreg/mesh/volume_mesh.hpp"
+#include "physreg/registration/surface/surface_matching.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace physreg {
+
+/// Every setting of paper 001's pipeline; defaults are the command's (partial_surface_spec() holds
+/// their ranges and help). The meshing ones (cell_size, seed, surface_scale, region_radius,
+/// vessel_scale, vessel_radius) are read where a case is made from files.
+struct PartialSurfaceSettings {
+    std::string method = "biomechanical";     ///< the result written: biomechanical, adjoint, rigid, icp
+    std::string model_kind = "homogeneous";   ///< homogeneous, heterogeneous (capsule and vessels)
+    double capsule_thickness = 0.1;           ///< mm
+    std::string material = "healthy";         ///< healthy (3.5 kPa), cirrhotic (30 kPa)
+    double young_modulus = 0.0;               ///< Pa; 0: from the material
+    double poisson = 0.45;
+    double cell_size = 7.0;                   ///< mm
+    double d90 = 5.0;                         ///< mm
+    double traction = 0.5;                    ///< fraction of E
+    double distance_fraction = 0.9;
+    double max_pair_distance = 40.0;          ///< mm
+    double normal_agreement = 0.7;
+    std::string support = "posterior";        ///< posterior, none
+    double support_radius = 10.0;             ///< mm, around support points
+    std::vector<std::int32_t> support_region; ///< surface region labels held
+    double support_stiffness = 0.0;           ///< N/mm; 0: held
+    double support_tolerance = 3.0;           ///< mm
+    double noise = 0.5;                       ///< mm, the adjoint method's discrepancy principle
+    double time_step = 0.1;                   ///< s
+    double plateau_tolerance = 0.01;          ///< mm
+    double plateau_rms_fraction = 0.5;
+    int newton_per_step = 1;
+    int max_steps_per_plateau = 100;
+    double field_spacing = 2.0;               ///< mm
+    double region_radius = 15.0;              ///< mm
+    double surface_scale = 1.0;
+    double vessel_scale = 1.0;
+    double vessel_radius = 1.5;               ///< mm
+    int seed = 1;
+
+    double young_modulus_pa() const;          ///< young_modulus, or the material's
+};
+
+const SettingsSpec<PartialSurfaceSettings>& partial_surface_spec();
+/// The specification's ranges and the settings' own rules; Error naming the setting as `naming` says.
+void validate(const PartialSurfaceSettings& settings, SettingNaming naming);
+
+/// What paper 001 registers: a tetrahedral liver model with a labelled surface, a cloud, and what
+/// judges the result when known.
+struct PartialSurfaceCase {
+    VolumeMesh mesh;                          ///< tetrahedra, one material
+    LabelledTriangles surface;                ///< regions: 0 surface, 1 umbilical notch, 2 anterior margin, others never paired
+    std::optional<TetrahedronQuality> quality;
+    LabelledPointCloud cloud;
+    std::vector<VesselBranch> vessels;        ///< the heterogeneous model's centrelines (may be empty)
+    std::vector<Vec3> support_points;         ///< further supports: surface nodes within support_radius
+    std::string support_points_source;        ///< names them in errors and the summary
+    std::vector<std::int32_t> support_nodes;  ///< further supports: node ids
+    std::string support_nodes_source;
+    std::optional<LandmarkSet> landmarks, truth; ///< targets at rest, and their true deformed positions
+    std::optional<SurfaceMesh> truth_surface;
+    std::optional<VolumeMesh> truth_mesh;     ///< a truth's mesh with its nodal displacement (nodal error)
+    std::vector<double> truth_displacement;
+    std::optional<ImageGeometry> field_geometry; ///< the dense field's grid (else one over the mesh)
+    nlohmann::json description = nlohmann::json::object();
+};
+
+struct PartialSurfaceMethod {
+    std::string name;                          ///< at_rest, rigid, icp, biomechanical, adjoint
+    std::vector<double> displacement_mm;       ///< 3 per model node
+    double seconds = 0.0;
+    nlohmann::json details = nlohmann::json::object();
+};
+
+struct PartialSurfaceResult {
+    PartialSurfaceSettings settings;
+    std::vector<PartialSurfaceMethod> methods;
+    std::size_t chosen = 0;
+    std::vector<std::int32_t> support_nodes;
+    std::optional<LandmarkSet> landmarks;      ///< the targets through the chosen result
+    ImageGeometry field_geometry;              ///< where displacement.nii.gz is sampled
+    nlohmann::json summary;                    ///< summary.json, as written
+    const PartialSurfaceMethod& chosen_method() const { return methods.at(chosen); }
+};
+
+/// Runs the pipeline. `progress(fraction, message)`. Throws Error for bad input (supports off the
+/// model, a cloud far from it) and when the chosen method fails.
+PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& c, const PartialSurfaceSettings& settings,
+                                              const std::function<void(double, const std::string&)>& progress = {});
+
+/// A case from files as register-surface takes them: exactly one model source (a label volume, a
+/// closed surface or a tetrahedral mesh), its regions (a labelled surface or picked seeds), the
+/// cloud, targets, truth, vessels and supports. Empty paths are left out; `notch_x_mm` places the
+/// anatomical rule's umbilical notch.
+struct PartialSurfaceFiles {
+    std::string labels, liver_labels, surface, model, regions, region_seeds, cloud, landmarks, landmarks_truth, truth_surface, vessels;
+    std::string support_points, support_nodes;
+    std::optional<double> notch_x_mm;
+};
+PartialSurfaceCase read_partial_surface_case(const PartialSurfaceFiles& files, const PartialSurfaceSettings& settings);
+/// Further supports from files: picked points (a landmark file) and node ids (one or more per
+/// line, '#' comments); empty paths are left out. Throws Error naming the file.
+void read_support_files(PartialSurfaceCase& c, const std::string& support_points, const std::string& support_nodes);
+
+} // namespace physreg

@@ -1,0 +1,63 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+#pragma once
+// What the Python module's bound areas share: numpy ↔ physreg conversions with their argument
+// checks (TypeError for the wrong kind or dtype, ValueError for shapes), progress callbacks, and
+// JSON ↔ Python objects for settings and summaries.
+#include "physreg/core/types.hpp"
+#include "physreg/image/image_geometry.hpp"
+#include "physreg/io/point_cloud.hpp"
+
+#include <nlohmann/json.hpp>
+#include <pybind11/functional.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace physreg::python {
+namespace py = pybind11;
+
+template <typename T>
+using CArray = py::array_t<T, py::array::c_style>;
+
+void require_dtype(const py::array& a, const py::dtype& expected, const char* argument);
+void require_c_contiguous(const py::array& a, const char* argument);
+/// An (N, 3) float64 array of points, copied into Vec3s; ValueError naming `argument`.
+std::vector<Vec3> points_from(const py::array& a, const char* argument);
+/// A view of a std::vector<Vec3> (N, 3) float64 owned by `owner`.
+py::array points_view(std::vector<Vec3>& points, py::handle owner);
+py::array volume_shape_check(const py::array& a, const char* argument);
+ImageGeometry geometry_for(const py::array& a, const ImageGeometry& given, const char* argument);
+/// A uint16 array [z, y, x] and its geometry → a LabelVolume (copied).
+LabelVolume label_volume_from(const py::array& labels, const ImageGeometry& geometry);
+/// A float32 array [z, y, x] and its geometry → a ScalarImage (copied).
+ScalarImage scalar_image_from(const py::array& image, const ImageGeometry& geometry, const char* argument);
+/// A cloud from numpy: points (N, 3) float64 mm, optional int32 labels (N,) (default 0) and normals (N, 3).
+LabelledPointCloud cloud_from(const py::array& points, const std::optional<py::array>& labels, const std::optional<py::array>& normals);
+/// A progress(fraction, message) callback for the library, called with the GIL held; Ctrl-C stops it.
+std::function<void(double, const std::string&)> progress_from(const std::optional<py::function>& progress);
+/// JSON → Python (dict, list, str, float, int, bool, None) and back (through Python's json module).
+py::object to_python(const nlohmann::json& value);
+nlohmann::json from_python(const py::handle& value);
+
+/// The bound areas beside module.cpp's.
+void bind_pipelines(py::module_& m); ///< bind_pipelines.cpp: papers 001 and 002 as the commands run them
+
+/// An image's values as a numpy array [z, y, x] (or [z, y, x, c]) that owns the image.
+template <typename Image, typename Value>
+py::array image_array(Image&& image, std::vector<Value> Image::*values, int components)
+{
+    auto* owned = new Image(std::move(image));
+    py::capsule owner(owned, [](void* p) { delete static_cast<Image*>(p); });
+    const auto& g = owned->geometry;
+    std::vector<py::ssize_t> shape{g.size[2], g.size[1], g.size[0]};
+    if (components > 1) shape.push_back(components);
+    return py::array_t<Value>(shape, ((*owned).*values).data(), owner);
+}
+
+
+
+} // namespace physreg::python

@@ -1,0 +1,600 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+#include "physreg/registration/surface/partial_surface_registration.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+#include "physreg/evaluation/surface_distance.hpp"
+#include "physreg/evaluation/tre.hpp"
+#include "physreg/field/displacement_sampling.hpp"
+#include "physreg/io/image_io.hpp"
+#include "physreg/io/landmarks_io.hpp"
+#include "physreg/io/mesh_io.hpp"
+#include "physreg/io/surface_io.hpp"
+#include "physreg/mechanics/elements/embedded_beams.hpp"
+#include "physreg/mechanics/elements/membrane.hpp"
+#include "physreg/mechanics/implicit/stiffness_assembly.hpp"
+#include "physreg/mesh/label_grid.hpp"
+#include "physreg/mesh/point_location.hpp"
+#include "physreg/registration/surface/surface_adjoint.hpp"
+#include "physreg/registration/surface/surface_model.hpp"
+#include "physreg/registration/surface/surface_registration.hpp"
+
+#include <Eigen/Geometry>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <set>
+#include <sstream>
+
+namespace physreg {
+using nlohmann::json;
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); }
+constexpr double unbounded = std::numeric_limits<double>::infinity();
+
+// ---- 2. supports ---------------------------------------------------------------------------------
+
+struct Supports {
+    std::vector<std::int32_t> nodes; ///< sorted, unique
+    json sources = json::array();
+};
+
+/// The anatomical supports: the posterior surface, picked points (with a radius), regions and node
+/// ids, together.
+Supports select_supports(const PartialSurfaceCase& c, const PartialSurfaceSettings& s)
+{
+    Supports out;
+    if (s.support == "posterior") {
+        const auto nodes = surface_nodes_facing(c.mesh, c.surface, Vec3::UnitY(), 0.5);
+        if (nodes.empty()) fail("--support posterior: no surface node faces posterior (+y) in the model");
+        out.nodes.insert(out.nodes.end(), nodes.begin(), nodes.end());
+        out.sources.push_back({{"source", "posterior"}, {"rule", "surface nodes whose normal · +y > 0.5"}, {"nodes", nodes.size()}});
+    }
+    if (!c.support_points.empty()) {
+        const auto nodes = surface_nodes_near(c.mesh, c.surface, c.support_points, s.support_radius);
+        if (nodes.empty())
+            fail("--support-points '{}': no surface node within --support-radius {} mm of its {} point(s) (are they on the model's surface, mm, LPS?)",
+                 c.support_points_source, s.support_radius, c.support_points.size());
+        out.nodes.insert(out.nodes.end(), nodes.begin(), nodes.end());
+        out.sources.push_back({{"source", c.support_points_source}, {"points", c.support_points.size()}, {"radius_mm", s.support_radius}, {"nodes", nodes.size()}});
+    }
+    const std::string region_text = fmt::format("{}", fmt::join(s.support_region, ","));
+    if (!s.support_region.empty()) {
+        // A labelled surface region (from --regions or --region-seeds): e.g. 3 = the bare area.
+        std::set<std::int32_t> nodes;
+        for (std::size_t t = 0; t < c.surface.triangles.size(); ++t)
+            if (std::count(s.support_region.begin(), s.support_region.end(), c.surface.labels[t])) nodes.insert(c.surface.triangles[t].begin(), c.surface.triangles[t].end());
+        if (nodes.empty()) fail("--support-region {}: no surface triangle of the model carries that region label (give them with --regions)", region_text);
+        out.nodes.insert(out.nodes.end(), nodes.begin(), nodes.end());
+        out.sources.push_back({{"source", "region " + region_text}, {"nodes", nodes.size()}});
+    }
+    if (!c.support_nodes.empty()) {
+        for (const auto n : c.support_nodes)
+            if (n < 0 || static_cast<std::size_t>(n) >= c.mesh.node_count())
+                fail("{}: node {} is not a node of the model (0 … {})", c.support_nodes_source.empty() ? "support nodes" : c.support_nodes_source, n, c.mesh.node_count() - 1);
+        out.nodes.insert(out.nodes.end(), c.support_nodes.begin(), c.support_nodes.end());
+        out.sources.push_back({{"source", c.support_nodes_source}, {"nodes", c.support_nodes.size()}});
+    }
+    std::sort(out.nodes.begin(), out.nodes.end());
+    out.nodes.erase(std::unique(out.nodes.begin(), out.nodes.end()), out.nodes.end());
+    std::set<std::int32_t> surface_nodes;
+    for (const auto& t : c.surface.triangles) surface_nodes.insert(t.begin(), t.end());
+    std::size_t on_surface = 0;
+    for (const auto n : out.nodes) on_surface += surface_nodes.count(n);
+    if (!out.nodes.empty() && on_surface >= surface_nodes.size())
+        fail("--support {}{}: the supports take every one of the {} surface nodes; nothing is left free to meet the cloud", s.support,
+             c.support_points.empty() && c.support_nodes.empty() && s.support_region.empty() ? "" : " with --support-points/--support-nodes/--support-region",
+             surface_nodes.size());
+    if (!out.nodes.empty())
+        logger()->info("register-surface: {} support nodes {}", out.nodes.size(),
+                       s.support_stiffness > 0 ? fmt::format("on springs of {} N/mm", s.support_stiffness) : std::string("held at rest"));
+    return out;
+}
+
+// ---- 3. methods ----------------------------------------------------------------------------------
+
+/// Labelled rigid ICP ("rigid") and plain ICP ("icp"), each from several starts; the supports
+/// judge which poses are plausible. `pose_determined` is cleared when far-apart poses fit alike.
+void run_rigid_methods(const PartialSurfaceCase& c, const TledModel& model, const SurfaceMatcher& matcher, const SurfaceRegistrationOptions& options,
+                       const PartialSurfaceSettings& s, std::vector<PartialSurfaceMethod>& methods, bool& pose_determined)
+{
+    for (const bool labelled : {true, false}) {
+        RobustRigidOptions robust;
+        robust.supports = options.fixed_nodes;
+        robust.support_tolerance_mm = s.support_tolerance;
+        const auto t0 = std::chrono::steady_clock::now();
+        const RobustRigidResult rr = register_surface_rigid_robust(model.rest_positions(), matcher, c.cloud, options.matching, labelled, robust);
+        const RigidSurfaceResult& r = rr.chosen;
+        json alternatives = json::array();
+        for (const auto& candidate : rr.candidates)
+            alternatives.push_back({{"start", candidate.start}, {"rotation_deg", Eigen::AngleAxisd(candidate.result.rotation).angle() * 180.0 / M_PI},
+                                    {"cloud_to_model_mean_mm", candidate.cloud_mean_mm}, {"support_motion_mm", candidate.support_motion_mm},
+                                    {"plausible", candidate.plausible}, {"chosen", candidate.start == rr.chosen_start}});
+        json d = {{"iterations", r.iterations}, {"converged", r.converged}, {"pairs", r.matching.kept},
+                  {"rotation_deg", Eigen::AngleAxisd(r.rotation).angle() * 180.0 / M_PI}, {"translation_mm", {r.translation[0], r.translation[1], r.translation[2]}},
+                  {"start", rr.chosen_start}, {"decision", rr.decision}, {"pose_determined", rr.pose_determined}, {"alternatives", alternatives}};
+        pose_determined = pose_determined && rr.pose_determined;
+        methods.push_back({labelled ? "rigid" : "icp", r.displacement_mm, seconds_since(t0), d});
+    }
+}
+
+json biomechanical_details(const SurfaceRegistrationResult& b)
+{
+    json plateaus = json::array();
+    for (const auto& p : b.plateaus) {
+        json k;
+        for (const auto& [label, v] : p.stiffness_n) k[std::to_string(label)] = v;
+        plateaus.push_back({{"plateau", p.plateau}, {"stiffness_n", k}, {"steps", p.steps}, {"settled", p.reached}, {"last_step_mm", p.last_step_mm},
+                            {"last_step_rms_mm", p.last_step_rms_mm}, {"pairs", p.matching.kept}, {"pruned_far", p.matching.pruned_far},
+                            {"pruned_distance", p.matching.pruned_distance}, {"pruned_normal", p.matching.pruned_normal},
+                            {"mean_pair_distance_mm", p.matching.mean_distance_mm}, {"factorisations", p.factorisations}, {"seconds", p.seconds}});
+    }
+    return {{"time_steps", b.steps}, {"factorisations", b.factorisations}, {"newton_iterations", b.newton_iterations},
+            {"time_split_s", {{"matching", b.matching_s}, {"forces", b.force_s}, {"assembly", b.assembly_s}, {"factorisation", b.factorisation_s}, {"solves", b.solve_s}}},
+            {"plateaus", plateaus}, {"completed", b.stopped.empty()}, {"stopped", b.stopped.empty() ? json(nullptr) : json(b.stopped)},
+            {"inverted_elements", b.inverted_elements}};
+}
+
+PartialSurfaceMethod run_adjoint(const PartialSurfaceCase& c, const SurfaceMatcher& matcher, const SurfaceRegistrationOptions& options, double E,
+                                 const PartialSurfaceSettings& s, const std::function<void(double, const std::string&)>& progress)
+{
+    AdjointSurfaceOptions a;
+    a.matching = options.matching;
+    a.young_modulus_pa = E;
+    a.poisson_ratio = s.poisson;
+    a.fixed_nodes = options.fixed_nodes;
+    a.noise_mm = s.noise;
+    const AdjointSurfaceResult r = register_surface_adjoint(c.mesh, matcher, c.cloud, a, progress);
+    json rungs = json::array();
+    for (const auto& g : r.rungs)
+        rungs.push_back({{"alpha_mm2_per_mj", g.alpha}, {"rms_distance_mm", g.rms_distance_mm}, {"strain_energy_mj", g.strain_energy_mj},
+                         {"lbfgs_iterations", g.lbfgs_iterations}, {"pairs", g.pairs}});
+    if (!r.discrepancy_reached)
+        logger()->warn("register-surface: the adjoint method never brought the cloud within {:.2f} mm (RMS); the smallest alpha is kept", a.discrepancy_factor * a.noise_mm);
+    return {"adjoint", r.displacement_mm, r.seconds,
+            {{"model", "static co-rotational linear tetrahedra, re-linearised (R K0 R^T, CHOLMOD) at every re-pairing; unknown surface forces"},
+             {"regularisation", "alpha x strain energy"},
+             {"alpha_rule", fmt::format("discrepancy principle: the largest alpha whose RMS point-to-plane distance is <= {} x the noise {} mm", a.discrepancy_factor, a.noise_mm)},
+             {"chosen_alpha_mm2_per_mj", r.rungs[r.chosen].alpha}, {"discrepancy_reached", r.discrepancy_reached},
+             {"rungs", rungs}, {"solves", r.solves}, {"warnings", r.warnings},
+             {"supports", a.fixed_nodes.empty() ? "none: soft springs to rest at every node" : "held"}}};
+}
+
+// ---- 4. evaluation -------------------------------------------------------------------------------
+
+struct Judges {
+    std::vector<NodeEmbedding> landmark_cells;
+    std::vector<std::uint8_t> node_used;
+    std::vector<std::optional<Vec3>> truth_at_nodes;
+    std::function<double(const std::vector<double>&)> strain_energy_mj;
+};
+
+json evaluate(const PartialSurfaceMethod& m, const PartialSurfaceCase& c, const Judges& judges)
+{
+    json r = m.details;
+    r["seconds"] = m.seconds;
+    // What a user can judge a result by without the truth (issue 32's safeguard).
+    std::vector<double> rest(3 * c.mesh.node_count());
+    for (std::size_t n = 0; n < c.mesh.node_count(); ++n)
+        for (int d = 0; d < 3; ++d) rest[3 * n + static_cast<std::size_t>(d)] = c.mesh.nodes[n][d];
+    const auto& u = m.displacement_mm;
+    const RigidMotion pose = implied_rigid_motion(rest, u);
+    double largest = 0.0;
+    for (std::size_t i = 0; i < u.size(); i += 3) largest = std::max(largest, std::hypot(u[i], u[i + 1], u[i + 2]));
+    r["largest_displacement_mm"] = largest;
+    r["strain_energy_mj"] = judges.strain_energy_mj(u);
+    r["implied_rigid_motion"] = {{"rotation_deg", pose.angle_deg}, {"translation_mm", {pose.translation[0], pose.translation[1], pose.translation[2]}},
+                                 {"non_rigid_rms_mm", pose.residual_rms_mm}};
+    const SurfaceMesh deformed = regions_surface(c.mesh, c.surface, &u);
+    const SurfaceDistance fit = points_to_surface(c.cloud.points, deformed, "cloud to model");
+    r["cloud_to_model_mm"] = {{"mean", fit.mean_mm}, {"max", fit.max_mm}};
+    if (c.truth_surface) {
+        const HausdorffReport h = hausdorff_distance(deformed, *c.truth_surface, "model vs truth surface");
+        r["hausdorff_mm"] = {{"model_to_truth", {{"mean", h.forward.mean_mm}, {"max", h.forward.max_mm}}},
+                             {"truth_to_model", {{"mean", h.backward.mean_mm}, {"max", h.backward.max_mm}}},
+                             {"mean", h.mean_mm()}, {"max", h.max_mm()}};
+    }
+    if (c.landmarks && c.truth) {
+        const TreReport tre = compute_tre(displace_landmarks(c.mesh, judges.landmark_cells, *c.landmarks, u), *c.truth, m.name + " landmarks");
+        r["tre"] = json::parse(tre_stats_json(tre));
+        r["tre_per_landmark"] = json::array();
+        for (const auto& e : tre.entries) r["tre_per_landmark"].push_back({{"name", e.name}, {"type", to_string(e.type)}, {"error_mm", e.error_mm}});
+    }
+    if (!judges.truth_at_nodes.empty()) {
+        std::vector<double> errors;
+        for (std::size_t i = 0; i < judges.truth_at_nodes.size(); ++i)
+            if (!judges.node_used[i] && judges.truth_at_nodes[i])
+                errors.push_back((Vec3(u[3 * i], u[3 * i + 1], u[3 * i + 2]) - *judges.truth_at_nodes[i]).norm());
+        const TreStats st = tre_stats(errors);
+        r["node_tre_mm"] = {{"nodes", st.count}, {"mean", st.mean_mm}, {"max", st.max_mm}, {"std", st.std_mm}};
+    }
+    return r;
+}
+
+/// Whether the data decide between the methods (issue 32): two methods that fit the cloud about
+/// equally well (mean distances within 0.5 mm or 25 %) but place the model differently (nodal RMS
+/// difference over 2 mm and over 3× their fit) are two answers the cloud cannot tell apart; so is a
+/// rigid fit whose starts found far-apart poses of equal fit.
+json determinacy(const std::vector<PartialSurfaceMethod>& methods, const json& evaluated, bool rigid_pose_determined)
+{
+    json notes = json::array();
+    bool determined = rigid_pose_determined;
+    if (!rigid_pose_determined) notes.push_back("rigid starts found poses rotated more than 10° apart that fit the cloud within 10 % of each other");
+    for (std::size_t a = 0; a < methods.size(); ++a)
+        for (std::size_t b = a + 1; b < methods.size(); ++b) {
+            const auto& ma = methods[a];
+            const auto& mb = methods[b];
+            if (ma.name == "at_rest" || mb.name == "at_rest") continue;
+            const double fa = evaluated[ma.name]["cloud_to_model_mm"]["mean"].get<double>(), fb = evaluated[mb.name]["cloud_to_model_mm"]["mean"].get<double>();
+            double sum = 0.0;
+            for (std::size_t i = 0; i < ma.displacement_mm.size(); ++i) sum += (ma.displacement_mm[i] - mb.displacement_mm[i]) * (ma.displacement_mm[i] - mb.displacement_mm[i]);
+            const double rms = std::sqrt(3.0 * sum / static_cast<double>(ma.displacement_mm.size()));
+            const bool alike = std::abs(fa - fb) <= std::max(0.5, 0.25 * std::min(fa, fb));
+            if (alike && rms > std::max(2.0, 3.0 * std::max(fa, fb))) {
+                determined = false;
+                notes.push_back(fmt::format("{} and {} fit the cloud alike ({:.2f} and {:.2f} mm) but place the model {:.1f} mm apart (nodal RMS)", ma.name,
+                                            mb.name, fa, fb, rms));
+            }
+        }
+    json out = {{"pose_determined", determined}, {"notes", notes}};
+    out["statement"] = determined ? "the methods that fit the data agree within what the data resolve"
+                                  : "the data do not determine the pose: the results below are alternatives the cloud cannot tell apart";
+    return out;
+}
+
+/// The truth's displacement at each model node (empty without a truth mesh; nothing outside it).
+std::vector<std::optional<Vec3>> truth_at_nodes(const PartialSurfaceCase& c)
+{
+    std::vector<std::optional<Vec3>> out;
+    if (!c.truth_mesh) return out;
+    const PointLocator locator(*c.truth_mesh);
+    for (const auto& x : c.mesh.nodes) {
+        const auto e = locator.locate(x);
+        if (!e) {
+            out.emplace_back();
+            continue;
+        }
+        const auto d = interpolate_nodal(*c.truth_mesh, *e, c.truth_displacement, 3);
+        out.emplace_back(Vec3(d[0], d[1], d[2]));
+    }
+    return out;
+}
+
+json model_json(const PartialSurfaceCase& c, const PartialSurfaceSettings& s, double E, const std::optional<Membrane>& capsule, const std::optional<EmbeddedBeams>& beams)
+{
+    json model = {{"kind", s.model_kind}, {"element", "linear tetrahedra (CGAL Mesh_3), co-rotational"}, {"nodes", c.mesh.node_count()},
+                  {"tetrahedra", c.mesh.cell_count()}, {"surface_triangles", c.surface.triangles.size()}, {"young_modulus_pa", E}, {"poisson_ratio", s.poisson}};
+    if (capsule)
+        model["capsule"] = {{"element", "co-rotational constant-strain triangles (plane stress)"}, {"triangles", capsule->size()},
+                            {"young_modulus_pa", MembraneMaterial{}.young_modulus_pa}, {"poisson_ratio", MembraneMaterial{}.poisson_ratio},
+                            {"thickness_mm", s.capsule_thickness}, {"area_mm2", capsule->total_area_mm2()}};
+    if (beams)
+        model["vessels"] = {{"element", "co-rotational Timoshenko beams embedded in the tetrahedra"}, {"elements", beams->size()},
+                            {"length_mm", beams->total_length_mm()}, {"segments_outside_model", beams->dropped_elements()},
+                            {"young_modulus_pa", BeamMaterial{}.young_modulus_pa}, {"poisson_ratio", BeamMaterial{}.poisson_ratio}};
+    if (c.quality)
+        model["quality"] = {{"min_dihedral_deg", c.quality->min_dihedral_deg}, {"max_dihedral_deg", c.quality->max_dihedral_deg},
+                            {"min_radius_ratio", c.quality->min_radius_ratio}, {"mean_edge_mm", c.quality->mean_edge_mm}};
+    std::map<std::string, int> region_triangles;
+    for (auto l : c.surface.labels) ++region_triangles[l == 1 ? "umbilical_notch" : l == 2 ? "anterior_margin" : "surface"];
+    model["region_triangles"] = region_triangles;
+    return model;
+}
+
+} // namespace
+
+double PartialSurfaceSettings::young_modulus_pa() const
+{
+    if (young_modulus > 0) return young_modulus;
+    return material == "cirrhotic" ? 30000.0 : 3500.0;
+}
+
+const SettingsSpec<PartialSurfaceSettings>& partial_surface_spec()
+{
+    using S = PartialSurfaceSettings;
+    static const SettingsSpec<S> spec = [] {
+        SettingsSpec<S> s("register-surface");
+        s.choice("method", "--method", &S::method, {"biomechanical", "adjoint", "rigid", "icp"},
+                 "biomechanical (default), adjoint (optimal control: static elastic model, unknown surface forces, solved by adjoint gradients), "
+                 "rigid (labelled rigid ICP) or icp (plain ICP); the others are reported beside it")
+            .choice("model_kind", "--model-kind", &S::model_kind, {"homogeneous", "heterogeneous"},
+                    "homogeneous (parenchyma only) or heterogeneous (plus Glisson's capsule: a membrane of 8 000 kPa on the surface, and the vessels, paper 001)")
+            .real("capsule_thickness", "--capsule-thickness", &S::capsule_thickness, "mm", "heterogeneous model: capsule thickness, mm", 0.0, unbounded, true)
+            .choice("material", "--material", &S::material, {"healthy", "cirrhotic"}, "healthy (E 3.5 kPa) or cirrhotic (30 kPa), paper 001")
+            .real("young_modulus", "--young-modulus", &S::young_modulus, "Pa", "parenchyma Young's modulus, Pa (0: from --material)", 0.0)
+            .real("poisson", "--poisson", &S::poisson, "", "Poisson's ratio", 0.0, 0.5, false, true)
+            .real("cell_size", "--cell-size", &S::cell_size, "mm", "tetrahedron size (largest circumradius), mm", 0.0, unbounded, true)
+            .real("d90", "--d90", &S::d90, "mm", "distance at which a pair force reaches 90 % of its maximum, mm", 0.0, unbounded, true)
+            .real("traction", "--traction", &S::traction, "", "largest pair traction as a fraction of E (sets k_max)", 0.0, unbounded, true)
+            .real("distance_fraction", "--distance-fraction", &S::distance_fraction, "", "pruning d_t: keep pairs closer than d_t × the largest", 0.0, 1.0, true)
+            .real("max_pair_distance", "--max-pair-distance", &S::max_pair_distance, "mm",
+                  "pairs longer than this are dropped (a cloud that does not belong to the model), mm", 0.0, unbounded, true)
+            .real("normal_agreement", "--normal-agreement", &S::normal_agreement, "", "pruning n_t: keep pairs whose normals agree ≥ n_t", -1.0, 1.0)
+            .choice("support", "--support", &S::support, {"posterior", "none"},
+                    "posterior (surface nodes facing posterior, normal · +y > 0.5, where the vena cava and ligaments hold a liver) or none (paper 001's free model)")
+            .real("support_radius", "--support-radius", &S::support_radius, "mm", "--support-points: radius, mm", 0.0, unbounded, true)
+            .labels("support_region", "--support-region", &S::support_region,
+                    "further support: surface triangles of these region labels (e.g. 3; from --regions, whose labels other than 0, 1, 2 are never paired with the cloud)")
+            .real("support_stiffness", "--support-stiffness", &S::support_stiffness, "N/mm",
+                  "0: supports held; > 0: springs of this stiffness, N/mm per node and direction, to the rest position (ligaments stretch)", 0.0)
+            .real("support_tolerance", "--support-tolerance", &S::support_tolerance, "mm",
+                  "rigid baselines: a pose that moves a support node farther than this is implausible, mm", 0.0, unbounded, true)
+            .real("noise", "--noise", &S::noise, "mm", "--method adjoint: the cloud's noise σ, mm, for the discrepancy principle that picks the regularisation weight",
+                  0.0, unbounded, true)
+            .real("time_step", "--time-step", &S::time_step, "s", "backward Euler time step, s", 0.0, unbounded, true)
+            .real("plateau_tolerance", "--plateau-tolerance", &S::plateau_tolerance, "mm", "a plateau ends when no node moves more than this in a step, mm…", 0.0,
+                  unbounded, true)
+            .real("plateau_rms_fraction", "--plateau-rms-fraction", &S::plateau_rms_fraction, "",
+                  "…or when the nodes' rms motion in a step is below this fraction of the plateau tolerance (0: off, paper 001's rule)", 0.0, 1.0)
+            .integer("newton_per_step", "--newton-per-step", &S::newton_per_step, "Newton iterations per time step (1: linearised backward Euler; 0: to convergence)", 0, 1000)
+            .integer("max_steps_per_plateau", "--max-steps-per-plateau", &S::max_steps_per_plateau, "time steps per plateau at most", 1, 1e6)
+            .real("field_spacing", "--field-spacing", &S::field_spacing, "mm", "voxel size of displacement.nii.gz when no label volume gives the grid, mm", 0.0,
+                  unbounded, true)
+            .real("region_radius", "--region-radius", &S::region_radius, "mm", "--region-seeds: geodesic radius of each region, mm", 0.0, unbounded, true)
+            .real("surface_scale", "--surface-scale", &S::surface_scale, "", "--surface: factor to mm (e.g. 1000 for SOFA meshes in metres)", 0.0, unbounded, true)
+            .real("vessel_scale", "--vessel-scale", &S::vessel_scale, "", "--vessels: factor to mm (e.g. 1000 for metres)", 0.0, unbounded, true)
+            .real("vessel_radius", "--vessel-radius", &S::vessel_radius, "mm", "--vessels: radius of files without radii, mm", 0.0, unbounded, true)
+            .integer("seed", "--seed", &S::seed, "seed of the CGAL mesher", 0, 2147483647);
+        return s;
+    }();
+    return spec;
+}
+
+void validate(const PartialSurfaceSettings& s, SettingNaming naming)
+{
+    const auto& spec = partial_surface_spec();
+    spec.validate(s, naming);
+    const auto n = [&](const char* key) { return spec.name(key, naming); };
+    if (s.method == "adjoint" && s.support_stiffness > 0)
+        fail("{} adjoint: {} {} N/mm: the adjoint method holds its supports (or, with {} none, ties every node by soft springs); elastic supports are for "
+             "the biomechanical method", n("method"), n("support_stiffness"), s.support_stiffness, n("support"));
+}
+
+PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& c, const PartialSurfaceSettings& settings,
+                                              const std::function<void(double, const std::string&)>& progress)
+{
+    const auto start = std::chrono::steady_clock::now();
+    const auto report = [&](double f, const std::string& m) {
+        if (progress) progress(f, m);
+    };
+    validate(settings, SettingNaming::option);
+    if (c.mesh.cell_type != CellType::tetrahedron) fail("register-surface: the model must hold tetrahedra (paper 001's model)");
+    PartialSurfaceResult result;
+    result.settings = settings;
+    const PartialSurfaceSettings& s = settings;
+    const double E = s.young_modulus_pa();
+    logger()->info("register-surface: model {} nodes, {} tetrahedra, {} surface triangles; cloud {} points", c.mesh.node_count(), c.mesh.cell_count(),
+                   c.surface.triangles.size(), c.cloud.points.size());
+
+    // 1. The model: co-rotational tetrahedra, and the heterogeneous model's capsule and vessels.
+    const SurfaceMatcher matcher(c.surface, c.mesh.node_count(), "the model's surface");
+    TledOptions tled;
+    tled.law = MaterialLaw::corotational;
+    const TledModel model(c.mesh, homogeneous_liver_tissues(E, s.poisson), tled);
+    std::optional<Membrane> capsule;
+    std::optional<EmbeddedBeams> beams;
+    if (s.model_kind == "heterogeneous") {
+        MembraneMaterial m;
+        m.thickness_mm = s.capsule_thickness;
+        capsule.emplace(c.surface.triangles, model.rest_positions(), m, "--model-kind heterogeneous: the capsule");
+        if (c.vessels.empty())
+            logger()->warn("register-surface: no vessel centrelines (--vessels): the heterogeneous model has the capsule only");
+        else
+            beams.emplace(c.mesh, c.vessels, BeamMaterial{}, s.cell_size, "--model-kind heterogeneous: the vessel beams");
+    } // the homogeneous model leaves the case's vessels out
+    SurfaceRegistrationOptions options;
+    options.matching.distance_fraction = s.distance_fraction;
+    options.matching.normal_agreement = s.normal_agreement;
+    options.matching.max_distance_mm = s.max_pair_distance;
+    options.force.d90_mm = s.d90;
+    options.dynamics.time_step_s = s.time_step;
+    options.plateau_tolerance_mm = s.plateau_tolerance;
+    options.plateau_rms_fraction = s.plateau_rms_fraction;
+    options.max_steps_per_plateau = s.max_steps_per_plateau;
+    options.newton_iterations_per_step = s.newton_per_step;
+    if (capsule) options.structures.push_back(&*capsule);
+    if (beams) options.structures.push_back(&*beams);
+
+    // 2. Supports, and paper 001's annealing schedules.
+    const Supports supports = select_supports(c, s);
+    options.fixed_nodes = supports.nodes;
+    options.support_stiffness_n_per_mm = s.support_stiffness;
+    result.support_nodes = supports.nodes;
+    const double spacing = mean_point_spacing_mm(c.cloud.points);
+    const double k_max = pair_stiffness_n(s.traction, E, spacing);
+    options.schedules = paper001_schedules(k_max);
+
+    // 3. Every method; the chosen one is the answer, the others are the report's baselines.
+    auto& methods = result.methods;
+    methods.push_back({"at_rest", std::vector<double>(3 * c.mesh.node_count(), 0.0), 0.0, json::object()});
+    bool rigid_pose_determined = true;
+    run_rigid_methods(c, model, matcher, options, s, methods, rigid_pose_determined);
+    report(0.05, "biomechanical registration");
+    const SurfaceRegistrationResult b = register_surface_biomechanical(model, matcher, c.cloud, options, [&](double f, const std::string& m) { report(0.05 + 0.85 * f, m); });
+    methods.push_back({"biomechanical", b.displacement_mm, b.seconds, biomechanical_details(b)});
+    if (s.method == "adjoint") {
+        report(0.6, "adjoint registration");
+        methods.push_back(run_adjoint(c, matcher, options, E, s, [&](double f, const std::string& m) { report(0.6 + 0.3 * f, m); }));
+    }
+
+    // 4. Evaluation.
+    report(0.92, "evaluation");
+    Judges judges;
+    judges.landmark_cells = c.landmarks ? embed_landmarks(c.mesh, *c.landmarks, 1.5 * s.cell_size, "the liver model") : std::vector<NodeEmbedding>{};
+    judges.node_used = b.node_used;
+    judges.truth_at_nodes = truth_at_nodes(c);
+    const StiffnessAssembler energy_assembler(model, nullptr, {});
+    judges.strain_energy_mj = [&](const std::vector<double>& u) {
+        double e = energy_assembler.energy(u.data()).energy_mj;
+        std::vector<double> scratch(u.size(), 0.0);
+        for (const auto* structure : options.structures) e += structure->add_forces(u.data(), scratch.data());
+        return e;
+    };
+    json evaluated;
+    for (const auto& m : methods) evaluated[m.name] = evaluate(m, c, judges);
+    for (std::size_t k = 0; k < methods.size(); ++k)
+        if (methods[k].name == s.method) result.chosen = k;
+    const auto& chosen = result.chosen_method();
+    if (c.landmarks) result.landmarks = displace_landmarks(c.mesh, judges.landmark_cells, *c.landmarks, chosen.displacement_mm);
+    result.field_geometry = c.field_geometry ? *c.field_geometry : image_grid_over_mesh(c.mesh, s.field_spacing, 2 * s.field_spacing);
+
+    json& summary = result.summary;
+    summary["command"] = "register-surface";
+    summary["units"] = {{"length", "mm"}, {"force", "N"}, {"time", "s"}, {"young_modulus", "Pa"}};
+    summary["inputs"] = c.description;
+    summary["method"] = s.method;
+    summary["settings"] = partial_surface_spec().to_json(s);
+    summary["support"] = s.support;
+    summary["support_nodes"] = options.fixed_nodes.size();
+    summary["supports"] = {{"sources", supports.sources}, {"kind", s.support_stiffness > 0 ? "elastic" : "held"}, {"stiffness_n_per_mm", s.support_stiffness},
+                           {"nodes", options.fixed_nodes}, {"rigid_plausibility_tolerance_mm", s.support_tolerance}};
+    summary["determinacy"] = determinacy(methods, evaluated, rigid_pose_determined);
+    if (c.truth_mesh) {
+        // The pose the ground truth implies, to judge the baselines' rotations by (reports only).
+        std::vector<double> truth_rest;
+        for (const auto& x : c.truth_mesh->nodes) truth_rest.insert(truth_rest.end(), {x[0], x[1], x[2]});
+        const RigidMotion pose = implied_rigid_motion(truth_rest, c.truth_displacement);
+        summary["truth"] = {{"implied_rigid_motion", {{"rotation_deg", pose.angle_deg},
+                                                      {"translation_mm", {pose.translation[0], pose.translation[1], pose.translation[2]}},
+                                                      {"non_rigid_rms_mm", pose.residual_rms_mm}}}};
+    }
+    summary["model"] = model_json(c, s, E, capsule, beams);
+    summary["cloud"] = {{"points", c.cloud.points.size()}, {"mean_spacing_mm", spacing}, {"normals", !c.cloud.normals.empty()}};
+    summary["parameters"] = {{"cell_size_mm", s.cell_size}, {"d90_mm", s.d90}, {"traction_ratio", s.traction}, {"k_max_n", k_max}, {"distance_fraction", s.distance_fraction},
+                             {"normal_agreement", s.normal_agreement}, {"time_step_s", s.time_step}, {"rayleigh_mass_per_s", options.dynamics.rayleigh_mass_per_s},
+                             {"rayleigh_stiffness_s", options.dynamics.rayleigh_stiffness_s}, {"plateau_tolerance_mm", s.plateau_tolerance},
+                             {"plateau_rms_fraction", s.plateau_rms_fraction}, {"exponent", 3}, {"r", {{"umbilical_notch", 2}, {"anterior_margin", 4}, {"surface", 10}}}};
+    summary["methods"] = evaluated;
+    // What went wrong on the way without ending the run (issue 46: numerical trouble backs a method off).
+    summary["notes"] = json::array();
+    if (!b.stopped.empty()) summary["notes"].push_back("biomechanical: " + b.stopped);
+    summary["seconds"] = seconds_since(start);
+    return result;
+}
+
+// ---- a case from files ---------------------------------------------------------------------------
+
+namespace {
+
+std::vector<std::int32_t> read_node_ids(const std::string& path, std::size_t node_count)
+{
+    const std::string what = "--support-nodes '" + path + "'";
+    require_existing_file(path, what);
+    std::ifstream in(path);
+    std::vector<std::int32_t> ids;
+    std::string line;
+    int number = 0;
+    while (std::getline(in, line)) {
+        ++number;
+        const auto hash = line.find('#');
+        if (hash != std::string::npos) line.resize(hash);
+        for (auto& ch : line)
+            if (ch == ',' || ch == ';' || ch == '\t' || ch == '\r') ch = ' ';
+        std::istringstream words(line);
+        std::string word;
+        while (words >> word) {
+            const auto v = parse_number(word);
+            if (!v) {
+                if (ids.empty() && number == 1 && (word == "node" || word == "id" || word == "node_id")) continue; // a header
+                fail("{}: line {}: '{}' is not a node id", what, number, word);
+            }
+            const auto id = to_integer<std::int32_t>(*v, what, "a node id");
+            if (id < 0 || static_cast<std::size_t>(id) >= node_count) fail("{}: line {}: node {} is not a node of the model (0 … {})", what, number, id, node_count - 1);
+            ids.push_back(id);
+        }
+    }
+    if (ids.empty()) fail("{}: no node id", what);
+    return ids;
+}
+
+} // namespace
+
+PartialSurfaceCase read_partial_surface_case(const PartialSurfaceFiles& f, const PartialSurfaceSettings& s)
+{
+    PartialSurfaceCase c;
+    const int sources = !f.labels.empty() + !f.model.empty() + !f.surface.empty();
+    if (sources != 1) fail("register-surface: give exactly one of --dataset, --labels, --surface and --model");
+    if (!f.regions.empty() && !f.region_seeds.empty()) fail("register-surface: give --regions or --region-seeds, not both");
+    if (f.cloud.empty()) fail("register-surface: --cloud is required with --labels, --surface or --model");
+    if (!f.labels.empty()) {
+        const LabelVolume labels = read_label_volume(f.labels);
+        std::set<std::int32_t> liver;
+        if (f.liver_labels.empty()) {
+            for (const auto& [label, count] : count_labels(labels))
+                if (label != 0) liver.insert(label);
+        } else {
+            for (const auto l : parse_label_list(f.liver_labels, "--liver-labels")) liver.insert(l);
+        }
+        SurfaceModel model = surface_model_from_labels(labels, liver, s.cell_size, f.notch_x_mm, static_cast<unsigned>(s.seed), "liver model of '" + f.labels + "'");
+        c.mesh = std::move(model.mesh);
+        c.surface = std::move(model.surface);
+        c.quality = model.quality;
+        c.field_geometry = labels.geometry;
+        c.description = {{"labels", f.labels}};
+    } else if (!f.surface.empty()) {
+        SurfaceMesh liver = read_surface(f.surface);
+        for (auto& v : liver.vertices) v *= s.surface_scale;
+        SurfaceModel model = surface_model_from_surface(liver, s.cell_size, f.notch_x_mm, static_cast<unsigned>(s.seed), "--surface '" + f.surface + "'");
+        c.mesh = std::move(model.mesh);
+        c.surface = std::move(model.surface);
+        c.quality = model.quality;
+        c.description = {{"surface", f.surface}};
+    } else {
+        c.mesh = read_volume_mesh(f.model);
+        if (c.mesh.cell_type != CellType::tetrahedron) fail("register-surface: --model '{}' must hold tetrahedra (paper 001's model)", f.model);
+        std::fill(c.mesh.cell_labels.begin(), c.mesh.cell_labels.end(), 1);
+        c.surface = unlabelled_boundary(c.mesh);
+        c.quality = measure_tetrahedra(c.mesh);
+        c.description = {{"model", f.model}};
+    }
+    if (!f.regions.empty()) {
+        c.surface = regions_from_surface(c.mesh, c.surface, read_surface(f.regions), 5.0, "--regions '" + f.regions + "'");
+        c.description["regions"] = f.regions;
+    } else if (!f.region_seeds.empty()) {
+        std::vector<RegionSeed> seeds;
+        for (const auto& l : read_landmarks(f.region_seeds)) {
+            const std::string prefix = l.name.substr(0, 2);
+            if (prefix != "UN" && prefix != "AM")
+                fail("--region-seeds '{}': landmark '{}' must be named UN… (umbilical notch) or AM… (anterior margin)", f.region_seeds, l.name);
+            seeds.push_back({prefix == "UN" ? feature_umbilical_notch : feature_anterior_margin, l.position});
+        }
+        c.surface = regions_from_seeds(c.mesh, c.surface, seeds, s.region_radius, 10.0, "--region-seeds '" + f.region_seeds + "'");
+        c.description["regions"] = fmt::format("grown {} mm along the surface from the points of {}", s.region_radius, f.region_seeds);
+    } else if ((f.labels.empty() && f.surface.empty()) || !f.notch_x_mm) {
+        c.description["regions"] = f.labels.empty() && f.surface.empty() ? "none (all surface)" : "anatomical rule, no umbilical notch (no --notch-x)";
+    } else {
+        c.description["regions"] = fmt::format("anatomical rule, notch at x = {} mm", *f.notch_x_mm);
+    }
+    c.cloud = read_point_cloud(f.cloud);
+    c.description["cloud"] = f.cloud;
+    if (!f.vessels.empty()) {
+        c.vessels = read_vessel_centrelines(f.vessels, s.vessel_scale, s.vessel_radius);
+        c.description["vessels"] = f.vessels;
+    }
+    if (!f.landmarks.empty()) c.landmarks = read_landmarks(f.landmarks);
+    if (!f.landmarks_truth.empty()) {
+        if (!c.landmarks) fail("register-surface: --landmarks-truth needs --landmarks (their rest positions)");
+        c.truth = read_landmarks(f.landmarks_truth);
+    }
+    if (!f.truth_surface.empty()) c.truth_surface = read_surface(f.truth_surface);
+    read_support_files(c, f.support_points, f.support_nodes);
+    return c;
+}
+
+void read_support_files(PartialSurfaceCase& c, const std::string& support_points, const std::string& support_nodes)
+{
+    if (!support_points.empty()) {
+        for (const auto& l : read_landmarks(support_points)) c.support_points.push_back(l.position);
+        c.support_points_source = support_points;
+    }
+    if (!support_nodes.empty()) {
+        c.support_nodes = read_node_ids(support_nodes, c.mesh.node_count());
+        c.support_nodes_source = support_nodes;
+    }
+}
+
+} // namespace physreg
