@@ -108,6 +108,7 @@ VolumeMesh mesh_labels(const py::array& labels, const ImageGeometry& geometry, c
             const auto given = tissues && tissues->count(label) ? tissues->at(label) : std::pair<double, double>{3500.0, 0.45};
             table.tissues.push_back({label, fmt::format("label {}", label), given.first, given.second, 1000.0, 0.0});
         }
+        if (table.tissues.empty()) table = defaults; // no label at all: the mesher says so
         py::gil_scoped_release release;
         return mesh_label_volume(v, table, o, "labels").mesh;
     }

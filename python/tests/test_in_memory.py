@@ -164,3 +164,19 @@ def test_a_single_tracked_pose_a_tool_speed_and_targets_in_hexahedra(dataset):
     node = int(np.argmax(u2))
     moved = two.map_points(nodes[node:node + 1].copy())
     assert np.allclose(moved[0], nodes[node] + two.displacement[node], atol=1e-9)
+
+
+def test_a_tool_that_goes_through_the_skin_is_an_error_not_a_result(dataset):
+    """Issue 46: a small sphere pushed deeper than its radius slides the skin's nodes round it and
+    ends inside the tissue; that is no prediction. Measured: a 5 mm sphere 10 mm into the coarse
+    liver left it at rest (largest displacement 0.00 mm) before this check."""
+    labels, geometry = physreg.read_labels(dataset / "rest" / "labels.nii.gz")
+    liver = np.isin(labels, [2, 3, 4]).astype(np.uint16)
+    model = physreg.Model.from_labels(liver, geometry, kind="hex", grid=(12, 9, 6), tissues={1: (3500.0, 0.45)})
+    model.hold(model.surface_nodes_facing((0.0, 1.0, 0.0)))
+    front = model.mesh.nodes[np.argmin(model.mesh.nodes[:, 1])]
+    start = front - np.array([0.0, 5.0, 0.0])
+    pressing = physreg.register(model, physreg.Tool(np.array([start, start + [0.0, 5.0, 0.0]]), radius_mm=5.0))
+    assert np.linalg.norm(pressing.displacement, axis=1).max() > 1.0
+    with pytest.raises(physreg.Error, match="the tool went through the model's surface instead of pressing it"):
+        physreg.register(model, physreg.Tool(np.array([start, start + [0.0, 10.0, 0.0]]), radius_mm=5.0))

@@ -458,6 +458,7 @@ CompressionPrediction predict_compression_condensed(const LiverModel& model, con
     } catch (const Error& e) {
         fail("{}: {}", what, e.what());
     }
+    require_no_tool_passage(model.mesh, out.displacement_mm, tool, what);
     out.landmarks = move_landmarks(model, out.displacement_mm, rest_landmarks);
     out.iterations = steps;
     for (std::size_t n = 0; 3 * n + 2 < out.displacement_mm.size(); ++n)

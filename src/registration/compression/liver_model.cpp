@@ -441,6 +441,45 @@ std::vector<double> transfer_displacement(const LiverModel& from, const std::vec
     return out;
 }
 
+ToolPassage tool_passage(const VolumeMesh& mesh, const std::vector<double>& u, const Indenter& tool)
+{
+    ToolPassage out;
+    if (tool.shape != IndenterShape::sphere || tool.path.empty()) return out;
+    if (u.size() != 3 * mesh.node_count()) fail("tool passage: {} displacement values for {} nodes", u.size(), mesh.node_count());
+    VolumeMesh deformed = mesh;
+    for (std::size_t n = 0; n < deformed.node_count(); ++n) deformed.nodes[n] += Vec3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
+    const PointLocator locator(deformed);
+    const Vec3 centre = tool.position(1.0);
+    std::vector<Vec3> directions{Vec3::Zero()};
+    for (int a = 0; a < 3; ++a)
+        for (const double sign : {-1.0, 1.0}) directions.push_back(sign * Vec3::Unit(a));
+    for (const double x : {-1.0, 1.0})
+        for (const double y : {-1.0, 1.0})
+            for (const double z : {-1.0, 1.0}) directions.push_back(Vec3(x, y, z).normalized());
+    for (const auto& d : directions) {
+        const Vec3 p = centre + 0.25 * tool.radius_mm * d;
+        ++out.samples;
+        if (locator.locate(p)) {
+            if (out.samples_inside == 0) out.first_inside = p;
+            ++out.samples_inside;
+        }
+    }
+    return out;
+}
+
+void require_no_tool_passage(const VolumeMesh& mesh, const std::vector<double>& u, const Indenter& tool, const std::string& what)
+{
+    const ToolPassage p = tool_passage(mesh, u, tool);
+    if (!p.passed()) return;
+    const double depth = tool.path.size() > 1 ? (tool.path.back() - tool.path.front()).norm() : 0.0;
+    fail("{}: the tool went through the model's surface instead of pressing it: {} of {} points of the {} mm sphere at its final position lie "
+         "inside the deformed tissue (e.g. ({:.1f}, {:.1f}, {:.1f}) mm; the tool travelled {:.1f} mm from first contact, {:.2f}× its radius). The "
+         "skin's nodes slid round the tool (node-to-surface contact holds the nodes, not the faces between them), so this is no prediction: use "
+         "smaller cells under the tool or a shallower pose",
+         what, p.samples_inside, p.samples, tool.radius_mm, p.first_inside.x(), p.first_inside.y(), p.first_inside.z(), depth,
+         tool.radius_mm > 0 ? depth / tool.radius_mm : 0.0);
+}
+
 CompressionPrediction predict_compression(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks,
                                           const PredictionOptions& options, const std::string& what)
 {
@@ -505,6 +544,10 @@ CompressionPrediction predict_compression(const LiverModel& model, const Indente
         break;
     }
     out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (options.refuse_tool_passage)
+        require_no_tool_passage(model.mesh, out.displacement_mm, tool, what);
+    else
+        out.tool_points_inside = tool_passage(model.mesh, out.displacement_mm, tool).samples_inside;
     for (std::size_t n = 0; n < model.mesh.node_count(); ++n)
         out.max_displacement_mm = std::max(out.max_displacement_mm, Vec3(out.displacement_mm[3 * n], out.displacement_mm[3 * n + 1],
                                                                          out.displacement_mm[3 * n + 2]).norm());

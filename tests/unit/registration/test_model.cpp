@@ -4,6 +4,8 @@
 #include "test_support.hpp"
 
 #include "physreg/image/distance_map.hpp"
+#include "physreg/mesh/hex_meshing.hpp"
+#include "physreg/registration/compression/liver_model.hpp"
 #include "physreg/registration/observation.hpp"
 #include "physreg/registration/surface/surface_model.hpp"
 
@@ -133,6 +135,39 @@ TEST(SharedModel, EachModeRefusesAModelItCannotSolveNamingWhy)
     Model far = tetrahedra;
     far.supports.push_back({"pins", {static_cast<std::int32_t>(far.mesh.node_count())}, {true, true, true}, Vec3::Zero()});
     EXPECT_NE(test::error_message([&] { far.validate("m"); }).find("not a node of the model"), std::string::npos);
+}
+
+
+TEST(ToolPassage, ATooDeepToolInsideTheModelIsFoundAndOneThatPressesIsNot)
+{
+    // A 20 × 20 × 10 mm block of 1 mm hexahedra at rest, its anterior face (−y side) at y = 0.
+    const LabelVolume block = test::make_volume({20, 20, 10}, [](int, int, int) -> std::uint16_t { return 1; }, Vec3::Ones(), Vec3(0.5, 0.5, 0.5));
+    TissueTable tissues;
+    tissues.tissues.push_back({1, "tissue", 3000.0, 0.45, 1000.0, 0.0});
+    const VolumeMesh mesh = mesh_label_volume(block, tissues, MeshingOptions{}, "block").mesh;
+    const std::vector<double> rest(3 * mesh.node_count(), 0.0);
+    Indenter tool;
+    tool.name = "sphere";
+    tool.radius_mm = 4.0;
+    // Pressing: the sphere rests on the face (its centre a radius in front of it).
+    tool.path = {Vec3(10, -6, 5), Vec3(10, -4, 5)};
+    EXPECT_FALSE(tool_passage(mesh, rest, tool).passed());
+    EXPECT_NO_THROW(require_no_tool_passage(mesh, rest, tool, "pressing"));
+    // Less than three quarters of a radius into the face: a bulge between nodes, not a passage.
+    tool.path.back() = Vec3(10, -1.1, 5);
+    EXPECT_FALSE(tool_passage(mesh, rest, tool).passed());
+    // Through the face: the tissue did not move, the sphere's centre is 2 mm inside the block.
+    tool.path.back() = Vec3(10, 2, 5);
+    const ToolPassage through = tool_passage(mesh, rest, tool);
+    EXPECT_EQ(through.samples, 15);
+    EXPECT_GT(through.samples_inside, 5);
+    const std::string message = test::error_message([&] { require_no_tool_passage(mesh, rest, tool, "compression X"); });
+    EXPECT_NE(message.find("compression X: the tool went through the model's surface"), std::string::npos) << message;
+    EXPECT_NE(message.find("travelled 8.0 mm from first contact, 2.00× its radius"), std::string::npos) << message;
+    // The same pose with the tissue moved out of the way (the block shifted 8 mm back) is no passage.
+    std::vector<double> pushed(3 * mesh.node_count(), 0.0);
+    for (std::size_t n = 0; n < mesh.node_count(); ++n) pushed[3 * n + 1] = 8.0;
+    EXPECT_FALSE(tool_passage(mesh, pushed, tool).passed());
 }
 
 } // namespace

@@ -129,6 +129,11 @@ struct PredictionOptions {
     /// Optional start (3 per node): an equilibrium of the same mesh with the tool at its final
     /// position, e.g. from other parameters during estimation. The tool then starts there.
     std::vector<double> initial_displacement_mm;
+    /// A tool that ends inside the model is an Error (require_no_tool_passage). false: recorded in
+    /// CompressionPrediction::tool_passage only — the coarse-to-fine scheme's coarse model, whose
+    /// cells are too coarse to hold the skin under the tool by design, and whose missing detail the
+    /// enrichment database supplies.
+    bool refuse_tool_passage = true;
 };
 
 struct CompressionPrediction {
@@ -139,12 +144,32 @@ struct CompressionPrediction {
     double max_displacement_mm = 0.0;
     double max_coupling_gap_mm = 0.0;        ///< largest |δ| over interface points (coupled)
     int slower_ramps = 0;                    ///< retries with a 3× slower tool ramp after a folded element
+    int tool_points_inside = 0;              ///< tool_passage's samples inside the deformed model (0: the tool only pressed)
 };
+
+/// Where a tool went through the model's surface instead of pressing it (issue 46): points of the
+/// tool at its final pose — the reference point and points a quarter radius from it in 14
+/// directions — that lie inside the deformed model. Node-to-surface contact keeps nodes out of the
+/// tool but not the faces between them: a tool pushed deep (or smaller than the cells) can slide the
+/// skin nodes round it and end inside the tissue. A sphere that only presses bulges into a face
+/// between nodes by less than three quarters of its radius unless the face's diagonal exceeds about
+/// twice the radius (a tool the model's cells cannot resolve), so a pressing tool does not count.
+struct ToolPassage {
+    int samples = 0, samples_inside = 0;
+    Vec3 first_inside = Vec3::Zero();  ///< mm, LPS: a tool point inside the deformed model
+    bool passed() const { return samples_inside > 0; }
+};
+/// `u`: 3 per node of `mesh` (mm). Spheres only (other shapes: nothing sampled).
+ToolPassage tool_passage(const VolumeMesh& mesh, const std::vector<double>& u, const Indenter& tool);
+/// Throws Error naming `what` when tool_passage finds the tool inside the model: a result whose
+/// tissue the tool has gone through is no prediction.
+void require_no_tool_passage(const VolumeMesh& mesh, const std::vector<double>& u, const Indenter& tool, const std::string& what);
 
 /// Static equilibrium with the tool moved from `tool.path.front()` (first contact) to
 /// `tool.path.back()`; it starts two cells back so that the model's own surface is met. Landmarks
 /// outside the mesh by more than one cell are an Error naming them; closer ones take the nearest
-/// cell's interpolation. Throws Error on inversion or non-convergence, naming `what`.
+/// cell's interpolation. Throws Error on inversion or non-convergence, and when the tool ends inside
+/// the model (require_no_tool_passage), naming `what`.
 CompressionPrediction predict_compression(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks,
                                           const PredictionOptions& options, const std::string& what);
 
