@@ -125,4 +125,30 @@ nlohmann::json from_python(const py::handle& value)
     return nlohmann::json::parse(text);
 }
 
+/// {name: (x, y, z)} mm LPS → landmarks (untyped: they count in the TRE's "all" group).
+LandmarkSet landmarks_from_dict(const std::map<std::string, std::array<double, 3>>& given, const char* argument)
+{
+    LandmarkSet set;
+    for (const auto& [name, p] : given) {
+        const Vec3 x(p[0], p[1], p[2]);
+        if (!x.allFinite()) throw py::value_error(fmt::format("{}: landmark '{}' is not finite", argument, name));
+        set.push_back({name, x, LandmarkType::unspecified});
+    }
+    return set;
+}
+
+py::dict landmarks_dict(const LandmarkSet& set)
+{
+    py::dict d;
+    for (const auto& l : set) d[py::str(l.name)] = py::make_tuple(l.position[0], l.position[1], l.position[2]);
+    return d;
+}
+
+py::tuple field_tuple(const DisplacementField& field)
+{
+    DisplacementField copy = field;
+    const ImageGeometry g = copy.geometry;
+    return py::make_tuple(image_array(std::move(copy), &DisplacementField::components, 3), g);
+}
+
 } // namespace physreg::python

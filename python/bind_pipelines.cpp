@@ -8,6 +8,7 @@
 #include "physreg/core/error.hpp"
 #include "physreg/field/displacement_sampling.hpp"
 #include "physreg/phantom/registration_cases.hpp"
+#include "physreg/registration/compression/compression_registration.hpp"
 #include "physreg/registration/images/image_registration.hpp"
 #include "physreg/registration/surface/partial_surface_registration.hpp"
 #include "physreg/registration/surface/surface_model.hpp"
@@ -18,47 +19,6 @@
 #include <map>
 
 namespace physreg::python {
-namespace {
-
-/// {name: (x, y, z)} mm LPS → landmarks (untyped: they count in the TRE's "all" group).
-LandmarkSet landmarks_from_dict(const std::map<std::string, std::array<double, 3>>& given, const char* argument)
-{
-    LandmarkSet set;
-    for (const auto& [name, p] : given) {
-        const Vec3 x(p[0], p[1], p[2]);
-        if (!x.allFinite()) throw py::value_error(fmt::format("{}: landmark '{}' is not finite", argument, name));
-        set.push_back({name, x, LandmarkType::unspecified});
-    }
-    return set;
-}
-
-py::dict landmarks_dict(const LandmarkSet& set)
-{
-    py::dict d;
-    for (const auto& l : set) d[py::str(l.name)] = py::make_tuple(l.position[0], l.position[1], l.position[2]);
-    return d;
-}
-
-/// The settings: the spec's defaults, then `settings` (a dict), then keyword overrides; checked with
-/// the keys as Python names them.
-template <typename Settings>
-Settings settings_from(const SettingsSpec<Settings>& spec, const std::optional<py::dict>& settings, const py::kwargs& overrides, const char* function)
-{
-    Settings s;
-    if (settings) spec.apply(s, from_python(*settings), "settings");
-    if (overrides.size() > 0) spec.apply(s, from_python(overrides), function);
-    validate(s, SettingNaming::key);
-    return s;
-}
-
-py::tuple field_tuple(const DisplacementField& field)
-{
-    DisplacementField copy = field;
-    const ImageGeometry g = copy.geometry;
-    return py::make_tuple(image_array(std::move(copy), &DisplacementField::components, 3), g);
-}
-
-} // namespace
 
 void bind_pipelines(py::module_& m)
 {
@@ -229,7 +189,12 @@ void bind_pipelines(py::module_& m)
     m.def("settings_spec", [](const std::string& mode) {
         if (mode == "register-images") return to_python(image_registration_spec().describe());
         if (mode == "register-surface") return to_python(partial_surface_spec().describe());
-        throw py::value_error(fmt::format("mode: '{}' has no settings specification (register-images, register-surface)", mode));
+        if (mode == "register-compression") return to_python(compression_spec().describe());
+        if (mode == "estimate") return to_python(estimation_spec().describe());
+        if (mode == "enrich-build") return to_python(enrichment_build_spec().describe());
+        if (mode == "enrich-apply") return to_python(enrichment_apply_spec().describe());
+        throw py::value_error(fmt::format("mode: '{}' has no settings specification (register-images, register-surface, register-compression, "
+                                          "estimate, enrich-build, enrich-apply)", mode));
     }, py::arg("mode"), "A mode's settings: {key: {option, kind, default, unit, range or choices, help}}.");
 }
 

@@ -3,6 +3,8 @@
 // What the Python module's bound areas share: numpy ↔ physreg conversions with their argument
 // checks (TypeError for the wrong kind or dtype, ValueError for shapes), progress callbacks, and
 // JSON ↔ Python objects for settings and summaries.
+#include "physreg/core/landmark.hpp"
+#include "physreg/core/settings_spec.hpp"
 #include "physreg/core/types.hpp"
 #include "physreg/image/image_geometry.hpp"
 #include "physreg/io/point_cloud.hpp"
@@ -12,7 +14,9 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <array>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -43,8 +47,28 @@ std::function<void(double, const std::string&)> progress_from(const std::optiona
 py::object to_python(const nlohmann::json& value);
 nlohmann::json from_python(const py::handle& value);
 
+/// {name: (x, y, z)} mm LPS → landmarks (untyped: they count in the TRE's "all" group); ValueError naming `argument`.
+LandmarkSet landmarks_from_dict(const std::map<std::string, std::array<double, 3>>& given, const char* argument);
+/// A displacement field → (float32 array [z, y, x, 3] mm, ImageGeometry).
+py::tuple field_tuple(const DisplacementField& field);
+/// Landmarks → {name: (x, y, z)}.
+py::dict landmarks_dict(const LandmarkSet& set);
+
+/// A mode's settings from Python: `s` (the specification's defaults unless given), then `settings` (a dict), then
+/// keyword overrides; checked with the keys as Python names them.
+template <typename Settings>
+Settings settings_from(const SettingsSpec<Settings>& spec, const std::optional<py::dict>& settings, const py::kwargs& overrides, const char* function,
+                       Settings s = {})
+{
+    if (settings) spec.apply(s, from_python(*settings), "settings");
+    if (overrides.size() > 0) spec.apply(s, from_python(overrides), function);
+    validate(s, SettingNaming::key);
+    return s;
+}
+
 /// The bound areas beside module.cpp's.
-void bind_pipelines(py::module_& m); ///< bind_pipelines.cpp: papers 001 and 002 as the commands run them
+void bind_pipelines(py::module_& m);   ///< bind_pipelines.cpp: papers 001 and 002 as the commands run them
+void bind_compression(py::module_& m); ///< bind_compression.cpp: paper 000 as the commands run it
 
 /// An image's values as a numpy array [z, y, x] (or [z, y, x, c]) that owns the image.
 template <typename Image, typename Value>

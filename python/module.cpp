@@ -645,6 +645,7 @@ PYBIND11_MODULE(_physreg, m)
           "relaxation iteration in cell sizes, as register-compression --tool-speed. Returns a Registration.");
 
     bind_pipelines(m);
+    bind_compression(m);
 
     m.def("run", [](const std::vector<std::string>& args, std::optional<py::function> progress) {
         struct Restore {

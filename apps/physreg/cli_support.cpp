@@ -116,18 +116,10 @@ void OutputFiles::write(const std::filesystem::path& path, const std::function<v
     m_written.push_back(path);
 }
 
-std::vector<double> parse_number_list(const std::string& text, const std::string& option)
+std::string tre_line(const TreReport& r)
 {
-    std::stringstream in(text);
-    std::string item;
-    std::vector<double> v;
-    while (std::getline(in, item, ',')) {
-        const auto value = parse_number(item);
-        if (!value) fail("{}: '{}' is not a number", option, item);
-        v.push_back(*value);
-    }
-    if (v.empty()) fail("{}: empty list", option);
-    return v;
+    return fmt::format("all {:.3f} ± {:.3f} (max {:.3f}) | surface {:.3f} | internal {:.3f} (tumour {:.3f}, vessel {:.3f}) mm", r.all.mean_mm,
+                       r.all.std_mm, r.all.max_mm, r.surface.mean_mm, r.internal.mean_mm, r.tumour.mean_mm, r.vessel.mean_mm);
 }
 
 namespace {

@@ -2,6 +2,8 @@
 #pragma once
 // Shared pieces of the physreg subcommands: JSON summaries, option checks, output paths.
 #include <CLI/CLI.hpp>
+
+#include "physreg/evaluation/tre.hpp"
 #include <filesystem>
 #include <functional>
 #include <utility>
@@ -17,6 +19,9 @@
 #include "physreg/model/tissue_table.hpp"
 
 namespace physreg::cli {
+
+/// One line of TRE figures for the log: all (mean ± sd, max), surface, internal (tumour, vessel), mm.
+std::string tre_line(const TreReport& r);
 
 struct CommonOptions {
     bool json = false; ///< print a JSON summary on stdout (logs stay on stderr)
@@ -51,8 +56,6 @@ void report(const CommonOptions& options, const nlohmann::json& summary);
 /// The tissue table from --tissues, or paper 000's default (labels 1, 2, 3) with a log line.
 TissueTable load_tissues(const std::string& path);
 
-/// "1,2.5,3" → numbers; Error naming `option` for an empty list or an item that is not a number.
-std::vector<double> parse_number_list(const std::string& text, const std::string& option);
 /// report.html in `folder` (`shown_as`: the final folder when `folder` is a staging one; it holds the command's summary.json), drawn by the Python package's
 /// physreg.report with matplotlib. A missing Python or matplotlib, or a failing script, is a
 /// warning naming the reason: the registration's own outputs are complete without it.

@@ -6,7 +6,9 @@
 // factorised once at rest, the candidate skin nodes' compliance precomputed, an LCP per update.
 #include "cli_support.hpp"
 #include "progress.hpp"
-#include "registration_cli.hpp"
+#include "settings_options.hpp"
+
+#include "physreg/registration/compression/compression_registration.hpp"
 
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
@@ -62,8 +64,7 @@ void add_subcommand_bench(CLI::App& app)
     auto* group = app.add_subcommand("bench", "Benchmarks of the registration pipeline (JSON)");
     group->require_subcommand(1);
     struct Options : CommonOptions {
-        std::string dataset, parameters, database, states = "A,B,C,D,E", held_out = "D,E", output, match = "parameters", blend = "auto", detail = "inf";
-        ModelOptions model;
+        std::string dataset, parameters, database, states = "A,B,C,D,E", held_out = "D,E", output;
         int steps = 20;
     };
     auto o = std::make_shared<Options>();
@@ -71,30 +72,29 @@ void add_subcommand_bench(CLI::App& app)
                                                 "(warm-started tool sequences); speed-up and final TRE");
     sub->add_option("--dataset", o->dataset, "Phantom dataset")->required();
     sub->add_option("--parameters", o->parameters, "Parameter file (physreg estimate) the database was built with");
-    add_model_options(sub, o->model);
+    auto settings = std::make_shared<SettingsOptions<EnrichmentApplySettings>>(sub, enrichment_apply_spec());
     sub->add_option("--database", o->database, "Enrichment database (physreg enrich build)")->required();
     sub->add_option("--states", o->states, "Compressions to follow (default A,B,C,D,E)");
     sub->add_option("--held-out", o->held_out, "Which of them are held out (never in the database or the estimation; default D,E): "
                                                "their TRE is reported apart from the training ones'");
     sub->add_option("--steps", o->steps, "Tool positions from first contact to the final depth (default 20)");
-    sub->add_option("--match", o->match, "parameters or field");
-    sub->add_option("--blend", o->blend, "auto or a number of blended conditions");
-    sub->add_option("--detail-length", o->detail, "Share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²), the rest the coarse field: inf (paper 000: all detail at any distance; default), L in mm, or auto (the leave-one-position-out best around the rest landmarks; measured unreliable, docs/enrichment.md)");
     sub->add_option("-o,--output", o->output, "JSON report (also printed with --json)");
     sub->add_flag("--json", o->json, "Print the report on stdout");
-    sub->callback([o] {
+    sub->callback([o, settings] {
         if (o->steps < 1) fail("--steps must be ≥ 1 (got {})", o->steps);
         if (!o->output.empty()) check_output_path(o->output, "--output");
-        const EnrichmentMatching how = parse_enrichment_matching(o->match);
+        const EnrichmentApplySettings s = settings->resolve();
+        validate(s, SettingNaming::option);
+        const EnrichmentMatching how = parse_enrichment_matching(s.match);
         const EnrichmentDatabase db = read_enrichment_database(o->database);
-        const LoadedModel loaded = load_model(o->dataset, o->parameters, o->model);
+        const CompressionSubject loaded = read_dataset_compression_subject(o->dataset, s, o->parameters);
         std::vector<NodeEmbedding> embedding;
         const LiverModel coarse = coarsen_liver_model(loaded.model, db.coarse_grid(), &embedding);
         check_database_fits(db, loaded.model, coarse, "--database '" + o->database + "'");
-        const int k = blend_size(o->blend, db, coarse, embedding, loaded.model);
-        const double detail = detail_length(o->detail, db, coarse, embedding, loaded.model, how, k, loaded.rest_landmarks);
-        const auto cases = compression_cases(loaded.dataset, split_names(o->states, "--states"));
-        const PredictionOptions options = prediction_options(o->model);
+        const int k = enrichment_blend_size(s.blend, db, coarse, embedding, loaded.model);
+        const double detail = enrichment_detail_length(s.detail_length, db, coarse, embedding, loaded.model, how, k, loaded.rest_landmarks);
+        const auto cases = compression_cases(read_phantom_dataset(o->dataset), split_names(o->states, "--states"));
+        const PredictionOptions options = s.prediction_options();
         json report;
         report["what"] = "time per update: new tool position → every fine node at equilibrium, warm-started from the previous position";
         report["threads"] = omp_get_max_threads();
@@ -104,7 +104,7 @@ void add_subcommand_bench(CLI::App& app)
         report["fine_model"] = {{"nodes", loaded.model.mesh.node_count()}, {"hexahedra", loaded.model.mesh.cell_count()},
                                 {"variant", to_string(loaded.model.parameters.variant)}};
         report["coarse_model"] = {{"nodes", coarse.mesh.node_count()}, {"hexahedra", coarse.mesh.cell_count()}};
-        report["database"] = {{"file", o->database}, {"conditions", db.conditions.size()}, {"match", o->match}, {"blend", k},
+        report["database"] = {{"file", o->database}, {"conditions", db.conditions.size()}, {"match", s.match}, {"blend", k},
                               {"detail_length_mm", length_json(detail)}};
         report["targets"] = {{"coarse_to_fine_ms", 10.0}, {"high_resolution_ms", 100.0}, {"tre_gap_mm", 0.5}};
         ProgressDisplay bar("bench enrich");
@@ -144,7 +144,7 @@ void add_subcommand_bench(CLI::App& app)
         bar.finish();
         const TreReport hr = pool_tre(tre_hr), c2f = pool_tre(tre_c2f);
         const double mean_hr = mean_of(all_hr), mean_c2f = mean_of(all_c2f);
-        report["summary"] = {{"method", o->model.solver},
+        report["summary"] = {{"method", s.solver},
                              {"high_resolution_ms_per_update", mean_hr},
                              {"coarse_to_fine_ms_per_update", mean_c2f},
                              {"coarse_to_fine_split_ms", {{"coarse_equilibrium", mean_of(all_coarse)},
@@ -165,7 +165,7 @@ void add_subcommand_bench(CLI::App& app)
         std::cerr << fmt::format("bench enrich ({}, {} threads): high resolution {:.1f} ms/update, coarse-to-fine {:.1f} ms/update, speed-up "
                                  "{:.1f}×; TRE at the final depth (high resolution vs coarse-to-fine): training {:.3f} vs {:.3f} mm, "
                                  "held-out {:.3f} vs {:.3f} mm\n",
-                                 o->model.solver, omp_get_max_threads(), mean_hr, mean_c2f, mean_hr / mean_c2f,
+                                 s.solver, omp_get_max_threads(), mean_hr, mean_c2f, mean_hr / mean_c2f,
                                  pool_tre(tre_hr_train).all.mean_mm, pool_tre(tre_c2f_train).all.mean_mm, pool_tre(tre_hr_held).all.mean_mm,
                                  pool_tre(tre_c2f_held).all.mean_mm);
         if (!o->output.empty())
@@ -175,9 +175,7 @@ void add_subcommand_bench(CLI::App& app)
 
     // bench condensed (issue 30).
     struct CondensedOptions : CommonOptions {
-        std::string dataset, parameters, states = "A,B,C,D,E", held_out = "D,E", output, nonlinear = "never", database, match = "parameters",
-                    blend = "auto", detail = "inf";
-        ModelOptions model;
+        std::string dataset, parameters, states = "A,B,C,D,E", held_out = "D,E", output, nonlinear = "never", database;
         int steps = 20;
         double margin_mm = 10.0;
         std::string memory_limit = "auto";
@@ -188,7 +186,7 @@ void add_subcommand_bench(CLI::App& app)
                                                     "contact problem on those nodes alone per update; TRE at the final depth");
     cond->add_option("--dataset", co->dataset, "Phantom dataset")->required();
     cond->add_option("--parameters", co->parameters, "Parameter file (physreg estimate)");
-    add_model_options(cond, co->model);
+    auto cond_settings = std::make_shared<SettingsOptions<EnrichmentApplySettings>>(cond, enrichment_apply_spec());
     cond->add_option("--states", co->states, "Compressions to follow (default A,B,C,D,E); all their tool paths define the candidate nodes");
     cond->add_option("--held-out", co->held_out, "Which of them are held out (default D,E): their TRE is reported apart");
     cond->add_option("--steps", co->steps, "Tool positions from first contact to the final depth (default 20)");
@@ -199,22 +197,21 @@ void add_subcommand_bench(CLI::App& app)
     cond->add_option("--database", co->database,
                      "Enrichment database (physreg enrich build): also coarse-to-fine on top of condensed contact — the coarse model "
                      "condensed, the database matched, the landmarks' fine nodes synthesised — timed per stage");
-    cond->add_option("--match", co->match, "With --database: parameters (default) or field");
-    cond->add_option("--blend", co->blend, "With --database: auto or a number of blended conditions");
-    cond->add_option("--detail-length", co->detail, "With --database: share of the stored detail against the distance d to the nearest stored condition, 1/(1+(d/L)²): inf (paper 000; default), L in mm, or auto (leave-one-position-out; measured unreliable, docs/enrichment.md)");
     cond->add_option("--candidate-margin", co->margin_mm, "Candidates: surface nodes within the tool's reach + this of a path, mm (default 10)");
     cond->add_option("--memory-limit", co->memory_limit, "Memory the precomputation may take (factor, compliance), e.g. 8G; auto (default): "
                                                          "80 % of the physical memory. Over it: an error naming the size needed");
     cond->add_option("-o,--output", co->output, "JSON report (also printed with --json)");
     cond->add_flag("--json", co->json, "Print the report on stdout");
-    cond->callback([co] {
+    cond->callback([co, cond_settings] {
+        const EnrichmentApplySettings s = cond_settings->resolve();
+        validate(s, SettingNaming::option);
         if (co->steps < 1) fail("--steps must be ≥ 1 (got {})", co->steps);
         if (!(co->margin_mm >= 0)) fail("--candidate-margin must be ≥ 0 mm (got {})", co->margin_mm);
         if (co->nonlinear != "never" && co->nonlinear != "relaxation") fail("--nonlinear must be never or relaxation (got '{}')", co->nonlinear);
-        const std::size_t memory_limit = parse_memory_limit(co->memory_limit, "--memory-limit");
+        const std::size_t memory_limit = parse_memory_size(co->memory_limit, "--memory-limit");
         if (!co->output.empty()) check_output_path(co->output, "--output");
-        const LoadedModel loaded = load_model(co->dataset, co->parameters, co->model);
-        const auto cases = compression_cases(loaded.dataset, split_names(co->states, "--states"));
+        const CompressionSubject loaded = read_dataset_compression_subject(co->dataset, s, co->parameters);
+        const auto cases = compression_cases(read_phantom_dataset(co->dataset), split_names(co->states, "--states"));
         const auto held_names = split_names(co->held_out, "--held-out");
         const std::set<std::string> held(held_names.begin(), held_names.end());
         std::vector<Indenter> tools;
@@ -235,13 +232,13 @@ void add_subcommand_bench(CLI::App& app)
         std::optional<CondensedCoarseToFine> c2f;
         int blend = 0;
         double detail = std::numeric_limits<double>::infinity();
-        const EnrichmentMatching how = parse_enrichment_matching(co->match);
+        const EnrichmentMatching how = parse_enrichment_matching(s.match);
         if (!co->database.empty()) {
             db = read_enrichment_database(co->database);
             coarse = coarsen_liver_model(loaded.model, db->coarse_grid(), &embedding);
             check_database_fits(*db, loaded.model, *coarse, "--database '" + co->database + "'");
-            blend = blend_size(co->blend, *db, *coarse, embedding, loaded.model);
-            detail = detail_length(co->detail, *db, *coarse, embedding, loaded.model, how, blend, loaded.rest_landmarks);
+            blend = enrichment_blend_size(s.blend, *db, *coarse, embedding, loaded.model);
+            detail = enrichment_detail_length(s.detail_length, *db, *coarse, embedding, loaded.model, how, blend, loaded.rest_landmarks);
             logger()->info("bench condensed: the coarse model ({} nodes) condensed for coarse-to-fine", coarse->mesh.node_count());
             c2f.emplace(loaded.model, *coarse, embedding, *db, tools, query, how, EnrichmentBlend(blend, detail), options);
         }
@@ -345,7 +342,7 @@ void add_subcommand_bench(CLI::App& app)
         if (c2f) {
             const auto& cp = c2f->coarse_model().precomputation();
             report["coarse_to_fine"] = {
-                {"database", {{"file", co->database}, {"conditions", db->conditions.size()}, {"match", co->match}, {"blend", blend},
+                {"database", {{"file", co->database}, {"conditions", db->conditions.size()}, {"match", s.match}, {"blend", blend},
                               {"detail_length_mm", length_json(detail)}}},
                 {"coarse_model", {{"nodes", coarse->mesh.node_count()}, {"hexahedra", coarse->mesh.cell_count()}}},
                 {"precomputation", {{"candidate_nodes", cp.candidate_nodes}, {"coarse_query_nodes", cp.query_nodes}, {"factorisation_s", cp.factorisation_s},

@@ -8,6 +8,7 @@
 #include "cli_support.hpp"
 
 #include "physreg/core/atomic_file.hpp"
+#include "physreg/registration/compression/compression_registration.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/io/image_io.hpp"
@@ -34,7 +35,6 @@
 #include "physreg/registration/compression/condensed_contact.hpp"
 #include "physreg/registration/compression/enrichment.hpp"
 #include "physreg/registration/compression/estimation.hpp"
-#include "registration_cli.hpp"
 
 #include <numeric>
 #include <omp.h>
@@ -497,9 +497,9 @@ void add_subcommand_demo(CLI::App& app)
         json summary = {{"preset", preset},
                         {"seed", o->seed},
                         {"methods", table},
-                        {"fitted", parameters_json(fit.fitted)},
+                        {"fitted", to_json(fit.fitted)},
                         // The optimiser's start: a fitted value equal to it was not moved by the data.
-                        {"fit_start", fit.history.empty() ? json(nullptr) : parameters_json(fit.history.front().parameters)},
+                        {"fit_start", fit.history.empty() ? json(nullptr) : to_json(fit.history.front().parameters)},
                         {"fit_at_bound", fit.at_bound},
                         {"fit_identifiability", [&] {
                              json j = json::object();

@@ -5,6 +5,7 @@
 #include "cli_support.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/registration/compression/compression_registration.hpp"
 #include "physreg/registration/images/image_registration.hpp"
 #include "physreg/registration/surface/partial_surface_registration.hpp"
 
@@ -38,18 +39,22 @@ void add_subcommand_settings(CLI::App& app)
     auto json = std::make_shared<bool>(false);
     auto* sub = app.add_subcommand("settings", "A registration mode's settings: keys of a settings file (--settings F) and of Python's dicts, "
                                                "command-line options, defaults, units, ranges and help");
-    sub->add_option("mode", *mode, "register-images or register-surface")->required();
+    sub->add_option("mode", *mode, "register-images, register-surface, register-compression, estimate, enrich-build or enrich-apply")->required();
     sub->add_flag("--json", *json, "Print the specification as JSON (physreg.settings_spec(MODE) in Python)");
     sub->callback([mode, json] {
-        if (*mode == "register-images") {
-            if (*json) std::cout << image_registration_spec().describe().dump(2) << "\n";
-            else print_table(image_registration_spec());
-        } else if (*mode == "register-surface") {
-            if (*json) std::cout << partial_surface_spec().describe().dump(2) << "\n";
-            else print_table(partial_surface_spec());
-        } else {
-            fail("settings: mode '{}' has no settings specification (register-images, register-surface)", *mode);
-        }
+        const auto show = [&](const auto& spec) {
+            if (*json) std::cout << spec.describe().dump(2) << "\n";
+            else print_table(spec);
+        };
+        if (*mode == "register-images") show(image_registration_spec());
+        else if (*mode == "register-surface") show(partial_surface_spec());
+        else if (*mode == "register-compression") show(compression_spec());
+        else if (*mode == "estimate") show(estimation_spec());
+        else if (*mode == "enrich-build") show(enrichment_build_spec());
+        else if (*mode == "enrich-apply") show(enrichment_apply_spec());
+        else
+            fail("settings: mode '{}' has no settings specification (register-images, register-surface, register-compression, estimate, "
+                 "enrich-build, enrich-apply)", *mode);
     });
 }
 

@@ -38,6 +38,7 @@ public:
                 v.option = command->add_flag(e.option, v.flag, help);
                 break;
             case SettingKind::choice:
+            case SettingKind::text:
                 v.text = d.get<std::string>();
                 v.option = command->add_option(e.option, v.text, help)->capture_default_str();
                 break;
@@ -64,6 +65,7 @@ public:
             case SettingKind::integer: e.set(s, v.integer, what); break;
             case SettingKind::flag: e.set(s, v.flag, what); break;
             case SettingKind::choice:
+            case SettingKind::text:
             case SettingKind::labels: e.set(s, v.text, what); break;
             }
         }

@@ -24,6 +24,11 @@ In memory (numpy arrays in, result objects out; no files):
     PartialSurfaceCase (SurfaceModel + cloud arrays, or from_dataset), register_partial_surface →
     PartialSurfaceRegistration (.displacement(), .field(case), .summary, .landmarks): paper 001's
     whole pipeline, the function register-surface calls (settings_spec('register-surface')).
+    CompressionSubject.from_dataset (the body at rest and its hexahedral model), CompressionCase
+    (a Tool and its truth, or from_dataset), predict_compression → CompressionRegistration
+    (.displacement, .field, .landmarks, .summary): paper 000, the function register-compression
+    calls (settings_spec('register-compression')); estimate_compression → CompressionEstimation
+    (.summary, .write_parameters(path)): estimate; predict_coarse_to_fine → CoarseToFine: enrich apply.
 
 The commands of the `physreg` program, run in this process with the same checks and messages,
 each returning the summary it wrote (a dict):
@@ -46,6 +51,11 @@ _os.environ.setdefault("PHYSREG_PYTHONPATH", str(_Path(__file__).resolve().paren
 
 from ._physreg import (  # noqa: F401,E402
     Cloud,
+    CoarseToFine,
+    CompressionCase,
+    CompressionEstimation,
+    CompressionRegistration,
+    CompressionSubject,
     Error,
     ImageGeometry,
     ImagePair,
@@ -62,14 +72,17 @@ from ._physreg import (  # noqa: F401,E402
     Tool,
     __version__,
     boundary_surface,
+    estimate_compression,
     hausdorff,
     mesh_from_labels,
+    predict_coarse_to_fine,
     read_displacement_field,
     read_image,
     read_labels,
     read_landmarks,
     read_mesh,
     read_surface,
+    predict_compression,
     register,
     register_image_pair,
     register_partial_surface,

@@ -13,6 +13,7 @@ std::string to_string(SettingKind kind)
     case SettingKind::flag: return "flag";
     case SettingKind::choice: return "choice";
     case SettingKind::labels: return "labels";
+    case SettingKind::text: return "text";
     }
     return "?";
 }

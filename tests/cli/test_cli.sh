@@ -579,7 +579,7 @@ expect_ok "register-compression, liver alone" "$physreg" --no-report register-co
   --grid 23x17x9 -o "$work/reg_B_liver"
 grep -q '"tool_contact": "no contact"' "$work/reg_B_liver/summary.json" && pass || failed "the liver alone is not touched by a tool on the skin"
 grep -q "no contact" "$work/err.txt" && pass || failed "a prediction without contact warns"
-expect_error "register-compression: unknown region" "body, liver" "$physreg" register-compression --dataset "$ph" --state B --region torso -o "$work/reg_bad_region"
+expect_error "register-compression: unknown region" "use body or liver" "$physreg" register-compression --dataset "$ph" --state B --region torso -o "$work/reg_bad_region"
 expect_ok "evaluate" "$physreg" evaluate --predicted "coupled=$work/reg_D/landmarks.csv" --predicted "homogeneous=$work/reg_D_h/landmarks.csv" \
   --truth "$ph/states/D/landmarks.csv" -o "$work/eval" --json
 for f in tre_coupled.csv tre_coupled.json tre_homogeneous.csv tre.png; do expect_file "$work/eval/$f"; done
@@ -587,13 +587,13 @@ grep -q '"internal"' "$work/out.txt" && pass || failed "evaluate --json reports 
 expect_ok "evaluate one series" "$physreg" evaluate --predicted "$work/reg_D/landmarks.csv" --truth "$ph/states/D/landmarks.csv" -o "$work/eval1"
 for f in tre.csv tre.json tre.png; do expect_file "$work/eval1/$f"; done
 # Bad input: nothing written.
-expect_error "estimate: negative stiffness" "k_c,s-t" "$physreg" estimate --dataset "$ph" --k-tumour -5 $g -o "$work/p_bad1.json"
+expect_error "estimate: negative stiffness" "--k-tumour -5 N/m must be ≥ 0" "$physreg" estimate --dataset "$ph" --k-tumour -5 $g -o "$work/p_bad1.json"
 expect_no_file "$work/p_bad1.json"
-expect_error "estimate: NaN stiffness" "k_c,s-v" "$physreg" estimate --dataset "$ph" --k-vessel nan $g -o "$work/p_bad2.json"
+expect_error "estimate: NaN stiffness" "--k-vessel nan N/m must be" "$physreg" estimate --dataset "$ph" --k-vessel nan $g -o "$work/p_bad2.json"
 expect_no_file "$work/p_bad2.json"
 expect_error "estimate: not a compression" "not a tool compression" "$physreg" estimate --dataset "$ph" --train insufflation $g -o "$work/p_bad3.json"
 expect_no_file "$work/p_bad3.json"
-expect_error "estimate: unknown variant" "homogeneous, shared-nodes, coupled" "$physreg" estimate --dataset "$ph" --variant jelly -o "$work/p_bad4.json"
+expect_error "estimate: unknown variant" "homogeneous, shared-nodes or coupled" "$physreg" estimate --dataset "$ph" --variant jelly -o "$work/p_bad4.json"
 expect_error "estimate: not a dataset" "manifest.json" "$physreg" estimate --dataset "$work" -o "$work/p_bad5.json"
 expect_no_file "$work/p_bad5.json"
 sed 's/"mesh_fingerprint": "[0-9a-f]*/"mesh_fingerprint": "0123456789abcdef/' "$work/params.json" > "$work/params_other.json"
@@ -681,7 +681,7 @@ assert s["method"] == "condensed" and s["condensed"]["tool_updates"] == 20 and s
 assert s["tre_against_dataset"]["all"]["mean_mm"] < s["tre_landmarks_at_rest"]["all"]["mean_mm"], s["tre_against_dataset"]
 PY
 expect_file "$work/reg_condensed/displacement.nii.gz"
-expect_error "estimate: --solver condensed is for register-compression" "not one of relaxation, newton" "$physreg" estimate --dataset "$ph" \
+expect_error "estimate: --solver condensed is for register-compression" "use relaxation or newton" "$physreg" estimate --dataset "$ph" \
   --train A,B --validate D --grid 27x20x13 --solver condensed -o "$work/est_condensed.json"
 # Coarse-to-fine on top (the database of the enrich checks above): timed per stage.
 expect_ok "bench condensed --database" "$physreg" --log-level warn bench condensed --dataset "$ph" --parameters "$work/params.json" \

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: GPL-3.0-or-later
 # Determinism: the main commands, run with the same inputs and seeds on 1 and on 2 threads, write
-# byte-identical files. summary.json files are compared after dropping run times (keys ending in
-# "seconds" or "_s") and with the two runs' folders in paths made equal; the ITK rigid and Demons
+# byte-identical files. JSON files (summaries, estimate's report and parameters) are compared after
+# dropping run times (keys ending in "seconds", "_s" or "_ms", or starting with "ms_") and with the
+# two runs' folders in paths made equal; the ITK rigid and Demons
 # baselines' metric figures inside them are compared to 1e-9 relative (ITK 5.2's v4 metric and
 # Demons filter sum one partial per thread; their fields and TRE are identical). report.html embeds
 # the summaries' timings and is not compared.
@@ -27,6 +28,11 @@ run_all() { # DIR
   $p mesh "$out/ph/rest/labels.nii.gz" --tissues "$out/ph/ground_truth_tissues.yaml" --grid 20x16x10 -o "$out/mesh.vtu" \
      --tetrahedra "$out/tets.vtu" >/dev/null &&
   $p register-compression --dataset "$out/ph" --state A --grid 12x10x6 -o "$out/rc" &&
+  $p estimate --dataset "$out/ph" --train A --validate none --grid 12x10x6 --max-evaluations 2 -o "$out/params.json" \
+     --report "$out/estimate.json" >/dev/null &&
+  $p register-compression --dataset "$out/ph" --state A --parameters "$out/params.json" --solver condensed -o "$out/rc_condensed" &&
+  $p enrich build --dataset "$out/ph" --parameters "$out/params.json" --coarse-grid 8x6x4 --depths 2,4,6 -o "$out/db.phe" >/dev/null &&
+  $p enrich apply --database "$out/db.phe" --dataset "$out/ph" --parameters "$out/params.json" --state A --blend 2 -o "$out/c2f" &&
   $p register-surface --dataset "$out/ph" --visible 50 --cell-size 10 --max-steps-per-plateau 20 -o "$out/rs" >/dev/null &&
   $p register-images --dataset "$out/ph" --cycles 2 --cell-size 8 --baselines all -o "$out/ri" >/dev/null
 }
@@ -55,7 +61,7 @@ compared=0
 while IFS= read -r f; do
   case "$f" in
     */report.html) continue ;;
-    */summary.json)
+    *.json) # summaries, estimate's report and parameter file
       python3 - "$work/t1/$f" "$work/t2/$f" "$ref_root" "$work/t2" "$mode" <<'PY' || { echo "FAILED: $f differs from the reference run"; failures=$((failures + 1)); }
 import json, math, sys
 # The runs' own folders appear in input paths: compare them as one.
@@ -68,7 +74,7 @@ def walk(x, y, path, loose):
         if not isinstance(y, dict) or not set(x) <= set(y) or (set(x) != set(y) and not may_add): bad.append(path); return
         added.extend(f"{path}/{k}" for k in sorted(set(y) - set(x)))
         for k in x:
-            if k.endswith("seconds") or k.endswith("_s"): continue
+            if k.endswith("seconds") or k.endswith("_s") or k.startswith("ms_") or k.endswith("_ms"): continue
             walk(x[k], y[k], f"{path}/{k}", loose or k.startswith(("rigid_", "demons_")))
     elif isinstance(x, list):
         if not isinstance(y, list) or len(x) != len(y): bad.append(path); return

@@ -8,6 +8,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace physreg {
 
@@ -53,6 +54,8 @@ T to_integer(double value, const std::string& what, const char* item)
 /// The whole of `text` as a number, as std::stod reads it (NaN and Inf included: callers decide), or
 /// nothing when it is not a number or has anything after the number.
 std::optional<double> parse_number(const std::string& text);
+/// "1,2.5,4" → numbers; Error naming `name` for an item that is not a number or an empty list.
+std::vector<double> parse_number_list(const std::string& text, const std::string& name);
 
 /// Throws MissingFileError "<what>: file does not exist" unless `path` exists.
 void require_existing_file(const std::filesystem::path& path, const std::string& what);

@@ -20,7 +20,7 @@
 
 namespace physreg {
 
-enum class SettingKind { real, integer, flag, choice, labels };
+enum class SettingKind { real, integer, flag, choice, labels, text };
 std::string to_string(SettingKind kind);
 
 /// How an error names a setting: as its command-line option (--cell-size) or its key (cell_size).
@@ -103,6 +103,18 @@ public:
         e.get = [member](const Settings& s) { return nlohmann::json(s.*member); };
         e.set = [member](Settings& s, const nlohmann::json& v, const std::string& what) {
             if (!v.is_string()) fail("{}: expected a word, got {}", what, v.dump());
+            s.*member = v.get<std::string>();
+        };
+        m_entries.push_back(std::move(e));
+        return *this;
+    }
+    /// Free text whose form the mode's validate() checks (a grid "54x40x26", a size "8G", a list "A,B").
+    SettingsSpec& text(std::string key, std::string option, std::string Settings::*member, std::string help)
+    {
+        Entry e{std::move(key), std::move(option), SettingKind::text, "", std::move(help), -inf(), inf(), false, false, {}, {}, {}};
+        e.get = [member](const Settings& s) { return nlohmann::json(s.*member); };
+        e.set = [member](Settings& s, const nlohmann::json& v, const std::string& what) {
+            if (!v.is_string()) fail("{}: expected text, got {}", what, v.dump());
             s.*member = v.get<std::string>();
         };
         m_entries.push_back(std::move(e));
