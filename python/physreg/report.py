@@ -289,6 +289,17 @@ def safeguard_section(summary):
         out += f"<p style='color:#a00'><b>{statement}</b></p><ul>{notes}</ul>"
     else:
         out += f"<p>{statement}.</p>"
+    guard = summary.get("safeguard")
+    if isinstance(guard, dict):
+        flags = guard.get("flags") or []
+        if flags:
+            out += (f"<p style='color:#a00'><b>Flagged: the answer written is {esc(guard.get('answer', '?'))}, "
+                    f"not {esc(guard.get('requested', '?'))}</b> (safeguard {esc(guard.get('setting', '?'))}).</p>"
+                    + "<ul>" + "".join(f"<li>{esc(f)}</li>" for f in flags) + "</ul>"
+                    if guard.get("answer") != guard.get("requested") else
+                    f"<p style='color:#a00'><b>Flagged, kept as asked:</b> {esc(guard.get('statement', ''))}</p>")
+        else:
+            out += f"<p>{esc(guard.get('statement', ''))}.</p>"
     truth = summary.get("truth", {}).get("implied_rigid_motion") if isinstance(summary.get("truth"), dict) else None
     head = "<tr><th>method</th><th>cloud → model mean</th><th>strain energy</th><th>largest displacement</th><th>implied rotation</th><th>rigid start</th></tr>"
     body = []

@@ -186,3 +186,27 @@ def test_paper001_settings_are_checked(dataset):
         physreg.register_partial_surface(case, method="adjoint", support_stiffness=2.0)
     spec = physreg.settings_spec("register-surface")
     assert spec["support"]["choices"] == ["posterior", "none"] and spec["d90"]["default"] == 5.0
+
+
+def test_paper001_safeguard_keeps_an_answer_that_fits_by_stretching(surface_through_the_command):
+    """Issue 46 item 5, the other side: the cloud is the model's front moved 12 mm sideways, a motion
+    the posterior supports forbid the rigid fits to follow (their starts are judged by the supports)
+    but the biomechanical model reaches by stretching. It fits the cloud better than the rigid fit and
+    at rest, so nothing is flagged and it stays the answer."""
+    out, _ = surface_through_the_command
+    model = physreg.SurfaceModel.from_mesh(physreg.read_mesh(out / "mesh.vtu"))
+    nodes = model.mesh.nodes
+    surface = np.unique(model.surface_triangles)
+    front = surface[nodes[surface, 1] < np.median(nodes[surface, 1])]  # LPS: anterior is −y
+    case = physreg.PartialSurfaceCase(model, nodes[front] + np.array([12.0, 0.0, 0.0]))
+    r = physreg.register_partial_surface(case, **SURFACE)
+    guard = r.summary["safeguard"]
+    fits = {name: m["cloud_to_model_mm"]["mean"] for name, m in r.summary["methods"].items()}
+    assert fits["biomechanical"] < min(fits["rigid"], fits["at_rest"]), fits
+    assert guard["flags"] == [] and guard["answer"] == "biomechanical" and r.method == "biomechanical", guard
+
+
+def test_paper001_safeguard_leaves_a_sound_answer_alone(surface_in_memory):
+    _, result = surface_in_memory
+    guard = result.summary["safeguard"]
+    assert guard["flags"] == [] and guard["answer"] == "biomechanical", guard

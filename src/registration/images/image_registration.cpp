@@ -313,6 +313,10 @@ const SettingsSpec<ImageRegistrationSettings>& image_registration_spec()
                     "initial alignment of the segmentations before every method: identity, centroid or rigid (centroids, then rigid on the fixed structures' distance maps)")
             .real("initial_min_reduction", "--initial-min-reduction", &S::initial_min_reduction, "",
                   "apply the initial alignment only when it removes more than this fraction of the structures' boundary RMS distance (0: always)", 0.0, 1.0)
+            .real("initial_max_rotation", "--initial-max-rotation", &S::initial_max_rotation, "degrees",
+                  "rigid alignment: the largest plausible rotation between the frames; a pose turned farther wins only when it fits the "
+                  "boundaries at most half as far as the best pose within it and closer by more than a voxel (180: the best fit alone)",
+                  0.0, 180.0, true)
             .choice("baselines", "--baselines", &S::baselines, {"all", "intensity", "labels", "none"}, "baselines in the report: all, intensity, labels or none")
             .choice("hold", "--hold", &S::hold, {"auto", "posterior", "none"},
                     "Dirichlet support: posterior (surface nodes facing +y), none, or auto (posterior for datasets, else none)")
@@ -395,12 +399,18 @@ ImageRegistrationResult register_images(const ImagePair& original, const ImageRe
     // 2. Initial alignment.
     report(0.01, "initial alignment");
     const InitialAlignment initial_mode = parse_initial_alignment(s.initial);
-    result.alignment = align_segmentations(original.fixed_labels, original.moving_labels, structures, initial_mode);
+    result.alignment = align_segmentations(original.fixed_labels, original.moving_labels, structures, initial_mode, s.initial_max_rotation);
     const SegmentationAlignment& alignment = result.alignment;
     if (initial_mode != InitialAlignment::identity)
         logger()->info("register-images: initial alignment ({}, start {}): rotation {:.2f}°, translation ({:.1f}, {:.1f}, {:.1f}) mm; structures' boundary RMS "
                        "distance {:.2f} → {:.2f} mm", s.initial, alignment.start, alignment.rotation_deg, alignment.translation[0], alignment.translation[1],
                        alignment.translation[2], alignment.rms_boundary_distance_before_mm, alignment.rms_boundary_distance_mm);
+    if (initial_mode == InitialAlignment::rigid) {
+        logger()->info("register-images: initial alignment: {}", alignment.decision);
+        if (!alignment.runner_up.empty())
+            logger()->info("register-images: initial alignment: runner-up {} ({:.1f}° from the winner), {:+.2f} mm RMS boundary distance",
+                           alignment.runner_up, alignment.runner_up_rotation_deg, alignment.runner_up_margin_mm);
+    }
     std::tie(result.aligned, result.alignment_decision) = alignment_decision(alignment, s);
     if (initial_mode != InitialAlignment::identity) logger()->info("register-images: initial alignment {}", result.alignment_decision);
     const ImagePair in = result.aligned ? aligned_pair(original, alignment) : original;
@@ -613,8 +623,19 @@ ImageRegistrationResult register_images(const ImagePair& original, const ImageRe
                                                          {alignment.rotation(2, 0), alignment.rotation(2, 1), alignment.rotation(2, 2)}}},
                                     {"convention", "x_fixed = R x_moving + t; every method's field includes it"},
                                     {"centroid_distance_before_mm", alignment.centroid_distance_mm},
+                                    {"max_plausible_rotation_deg", s.initial_max_rotation},
                                     {"boundary_rms_distance_mm", {{"before", alignment.rms_boundary_distance_before_mm}, {"after", alignment.rms_boundary_distance_mm}}},
                                     {"mesh_frame", !result.aligned ? "moving" : "fixed, after the initial alignment (mesh.vtu displacement: the non-rigid part)"}};
+    if (!alignment.hypotheses.empty()) {
+        json& a = summary["initial_alignment"];
+        a["pose_decision"] = alignment.decision;
+        for (const auto& h : alignment.hypotheses)
+            a["hypotheses"].push_back({{"start", h.start}, {"rms_boundary_distance_mm", h.rms_boundary_distance_mm}, {"rotation_deg", h.rotation_deg},
+                                       {"plausible", h.plausible}, {"chosen", h.start == alignment.start}});
+        if (!alignment.runner_up.empty())
+            a["runner_up"] = {{"start", alignment.runner_up}, {"rotation_from_winner_deg", alignment.runner_up_rotation_deg},
+                              {"rms_margin_mm", alignment.runner_up_margin_mm}};
+    }
     summary["methods"] = methods_json;
     summary["seconds"] = seconds_since(start);
     return result;

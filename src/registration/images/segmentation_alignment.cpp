@@ -11,6 +11,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <set>
 
 namespace physreg {
@@ -154,12 +155,52 @@ Fit refine(const Maps& maps, const Boundaries& moving, Mat3 r, Vec3 t)
     return f;
 }
 
+double rotation_angle_deg(const Mat3& r) { return Eigen::AngleAxisd(r).angle() * 180.0 / M_PI; }
+
+/// The winning hypothesis: the best plausible one (the first start — centroids — wins near-ties
+/// within 5 %: a symmetric shape's axes are a guess, its centroid is not), unless an implausible
+/// one fits at most half as far and closer by more than `voxel_mm`. `decision` says why.
+std::size_t choose_hypothesis(const std::vector<AlignmentHypothesis>& h, double max_deg, double voxel_mm, std::string* decision)
+{
+    const auto best_of = [&](bool plausible) {
+        std::optional<std::size_t> best;
+        for (std::size_t i = 0; i < h.size(); ++i)
+            if (h[i].plausible == plausible && (!best || h[i].rms_boundary_distance_mm < 0.95 * h[*best].rms_boundary_distance_mm)) best = i;
+        return best;
+    };
+    const auto near = best_of(true), far = best_of(false);
+    if (!near) {
+        *decision = fmt::format("no start ended within {:.0f}° of the identity; the best fit ({}, {:.1f}°) is taken", max_deg, h[*far].start,
+                                h[*far].rotation_deg);
+        return *far;
+    }
+    const double a = h[*near].rms_boundary_distance_mm;
+    if (far) {
+        const double b = h[*far].rms_boundary_distance_mm;
+        if (b < 0.5 * a && a - b > voxel_mm) {
+            *decision = fmt::format("the pose turned {:.1f}° ({}) fits the boundaries at {:.2f} mm against {:.2f} mm for the best within {:.0f}°: "
+                                    "less than half, and closer by more than a voxel ({:.2f} mm)", h[*far].rotation_deg, h[*far].start, b, a, max_deg, voxel_mm);
+            return *far;
+        }
+        if (b < a) {
+            *decision = fmt::format("kept the best pose within {:.0f}° ({}, {:.1f}°, {:.2f} mm): the pose turned {:.1f}° ({}) fits at {:.2f} mm, "
+                                    "not by the margin the data resolve (half the distance and a voxel, {:.2f} mm)", max_deg, h[*near].start,
+                                    h[*near].rotation_deg, a, h[*far].rotation_deg, h[*far].start, b, voxel_mm);
+            return *near;
+        }
+    }
+    *decision = fmt::format("the best fit ({}, {:.1f}°, {:.2f} mm) lies within {:.0f}° of the identity", h[*near].start, h[*near].rotation_deg, a, max_deg);
+    return *near;
+}
+
 } // namespace
 
 SegmentationAlignment align_segmentations(const LabelVolume& fixed, const LabelVolume& moving, const std::vector<std::int32_t>& structures,
-                                          InitialAlignment mode)
+                                          InitialAlignment mode, double max_plausible_rotation_deg)
 {
     if (structures.empty()) fail("initial alignment: no structure to align");
+    if (!(max_plausible_rotation_deg > 0 && max_plausible_rotation_deg <= 180))
+        fail("initial alignment: the largest plausible rotation must lie in (0, 180] degrees (got {})", max_plausible_rotation_deg);
     SegmentationAlignment out;
     out.mode = mode;
     const StructurePoints f = collect(fixed, structures, "fixed");
@@ -186,14 +227,27 @@ SegmentationAlignment align_segmentations(const LabelVolume& fixed, const LabelV
         std::vector<std::pair<std::string, Mat3>> starts{{"centroids", Mat3::Identity()}};
         for (int signs = 0; signs < 4; ++signs)
             starts.push_back({"principal axes " + std::to_string(signs), ff.axes * detail::axis_flip(signs) * fm.axes.transpose()});
-        Fit best{Mat3::Identity(), Vec3::Zero(), std::numeric_limits<double>::infinity(), 0};
+        std::vector<Fit> fits;
         for (const auto& [name, r0] : starts) {
-            const Fit fit = refine(maps, m.boundary, r0, cf - r0 * cm);
-            logger()->debug("initial alignment: start {}: RMS boundary distance {:.3f} mm after {} iterations", name, fit.rms, fit.iterations);
-            // The centroid start wins ties: a symmetric shape's axes are a guess, its centroid is not.
-            if (!std::isfinite(best.rms) || fit.rms < 0.95 * best.rms) {
-                best = fit;
-                out.start = name;
+            fits.push_back(refine(maps, m.boundary, r0, cf - r0 * cm));
+            const double angle = rotation_angle_deg(fits.back().rotation);
+            out.hypotheses.push_back({name, fits.back().rms, angle, angle <= max_plausible_rotation_deg});
+            logger()->debug("initial alignment: start {}: RMS boundary distance {:.3f} mm, rotation {:.1f}° after {} iterations", name,
+                            fits.back().rms, angle, fits.back().iterations);
+        }
+        const double voxel_mm = fixed.geometry.spacing.maxCoeff();
+        const std::size_t chosen = choose_hypothesis(out.hypotheses, max_plausible_rotation_deg, voxel_mm, &out.decision);
+        const Fit& best = fits[chosen];
+        out.start = out.hypotheses[chosen].start;
+        // The runner-up: the best fit among the poses that differ from the winner (by more than 5°).
+        double runner_rms = std::numeric_limits<double>::infinity();
+        for (std::size_t i = 0; i < fits.size(); ++i) {
+            const double apart = rotation_angle_deg(fits[i].rotation * best.rotation.transpose());
+            if (apart > 5.0 && fits[i].rms < runner_rms) {
+                runner_rms = fits[i].rms;
+                out.runner_up = out.hypotheses[i].start;
+                out.runner_up_margin_mm = fits[i].rms - best.rms;
+                out.runner_up_rotation_deg = apart;
             }
         }
         out.rotation = best.rotation;

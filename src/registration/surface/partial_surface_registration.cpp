@@ -21,6 +21,7 @@
 
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -241,7 +242,7 @@ json determinacy(const std::vector<PartialSurfaceMethod>& methods, const json& e
             }
         }
     json out = {{"pose_determined", determined}, {"notes", notes}};
-    out["statement"] = determined ? "the methods that fit the data agree within what the data resolve"
+    out["statement"] = determined ? "no two methods that fit the cloud alike place the model apart beyond what the data resolve"
                                   : "the data do not determine the pose: the results below are alternatives the cloud cannot tell apart";
     return out;
 }
@@ -301,6 +302,10 @@ const SettingsSpec<PartialSurfaceSettings>& partial_surface_spec()
         s.choice("method", "--method", &S::method, {"biomechanical", "adjoint", "rigid", "icp"},
                  "biomechanical (default), adjoint (optimal control: static elastic model, unknown surface forces, solved by adjoint gradients), "
                  "rigid (labelled rigid ICP) or icp (plain ICP); the others are reported beside it")
+            .choice("safeguard", "--safeguard", &S::safeguard, {"conservative", "keep"},
+                    "when the deformable result fits the cloud worse than the rigid fit or than the model at rest, or the methods that fit the "
+                    "data place the model apart (the data do not determine it): conservative writes the rigid fit (or the model at rest when "
+                    "that fits better) and says why; keep writes the deformable result anyway, flagged")
             .choice("model_kind", "--model-kind", &S::model_kind, {"homogeneous", "heterogeneous"},
                     "homogeneous (parenchyma only) or heterogeneous (plus Glisson's capsule: a membrane of 8 000 kPa on the surface, and the vessels, paper 001)")
             .real("capsule_thickness", "--capsule-thickness", &S::capsule_thickness, "mm", "heterogeneous model: capsule thickness, mm", 0.0, unbounded, true)
@@ -352,6 +357,49 @@ void validate(const PartialSurfaceSettings& s, SettingNaming naming)
     if (s.method == "adjoint" && s.support_stiffness > 0)
         fail("{} adjoint: {} {} N/mm: the adjoint method holds its supports (or, with {} none, ties every node by soft springs); elastic supports are for "
              "the biomechanical method", n("method"), n("support_stiffness"), s.support_stiffness, n("support"));
+}
+
+/// The safeguard (issue 46 item 5), judged without the truth: a deformable answer (biomechanical,
+/// adjoint) that fits the cloud worse than the rigid fit or than the model left at rest (by more
+/// than 5 % and 0.1 mm), or that the data do not determine, is flagged; with the conservative
+/// setting the answer becomes the rigid fit, or the model at rest when that fits the cloud better or
+/// the rigid starts disagree on the pose.
+PartialSurfaceSafeguard judge_deformable_answer(const json& evaluated, const json& determinacy_json, bool rigid_pose_determined,
+                                                const std::string& requested, const std::string& mode)
+{
+    PartialSurfaceSafeguard g;
+    g.requested = requested;
+    g.answer = requested;
+    const auto fit = [&](const std::string& name) { return evaluated.at(name).at("cloud_to_model_mm").at("mean").get<double>(); };
+    const auto has = [&](const std::string& name) { return evaluated.contains(name); };
+    if (requested != "biomechanical" && requested != "adjoint") {
+        g.statement = "the answer is a rigid motion: nothing to safeguard";
+        return g;
+    }
+    const double mine = fit(requested);
+    const auto worse = [&](double other) { return mine > 1.05 * other && mine > other + 0.1; };
+    if (has("rigid") && worse(fit("rigid")))
+        g.flags.push_back(fmt::format("{} fits the cloud worse than the rigid fit ({:.2f} against {:.2f} mm mean distance)", requested, mine, fit("rigid")));
+    if (worse(fit("at_rest")))
+        g.flags.push_back(fmt::format("{} fits the cloud worse than the model left at rest ({:.2f} against {:.2f} mm)", requested, mine, fit("at_rest")));
+    if (!determinacy_json["pose_determined"].get<bool>()) {
+        std::vector<std::string> notes;
+        for (const auto& n : determinacy_json["notes"]) notes.push_back(n.get<std::string>());
+        g.flags.push_back(fmt::format("the data do not determine the pose ({})", fmt::join(notes, "; ")));
+    }
+    if (g.flags.empty()) {
+        g.statement = fmt::format("{} fits the cloud at least as well as the rigid fit and the model at rest, and the data determine it", requested);
+        return g;
+    }
+    if (mode == "keep") {
+        g.statement = fmt::format("{} is flagged ({}) and kept, as the safeguard setting 'keep' asks", requested, fmt::join(g.flags, "; "));
+        return g;
+    }
+    // The rigid fit, unless the model at rest fits better or the rigid starts disagree on the pose.
+    g.answer = has("rigid") && rigid_pose_determined && fit("rigid") <= fit("at_rest") ? "rigid" : "at_rest";
+    g.statement = fmt::format("{} is flagged ({}); the answer written is the {} — the most conservative plausible one (safeguard keep writes {} anyway)",
+                              requested, fmt::join(g.flags, "; "), g.answer == "rigid" ? "rigid fit" : "model left at rest", requested);
+    return g;
 }
 
 PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& c, const PartialSurfaceSettings& settings,
@@ -436,8 +484,11 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& c, const
     };
     json evaluated;
     for (const auto& m : methods) evaluated[m.name] = evaluate(m, c, judges);
+    const json determined = determinacy(methods, evaluated, rigid_pose_determined);
+    result.safeguard = judge_deformable_answer(evaluated, determined, rigid_pose_determined, s.method, s.safeguard);
+    if (!result.safeguard.flags.empty()) logger()->warn("register-surface: {}", result.safeguard.statement);
     for (std::size_t k = 0; k < methods.size(); ++k)
-        if (methods[k].name == s.method) result.chosen = k;
+        if (methods[k].name == result.safeguard.answer) result.chosen = k;
     const auto& chosen = result.chosen_method();
     if (c.landmarks) result.landmarks = displace_landmarks(c.mesh, judges.landmark_cells, *c.landmarks, chosen.displacement_mm);
     result.field_geometry = c.field_geometry ? *c.field_geometry : image_grid_over_mesh(c.mesh, s.field_spacing, 2 * s.field_spacing);
@@ -452,7 +503,9 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& c, const
     summary["support_nodes"] = options.fixed_nodes.size();
     summary["supports"] = {{"sources", supports.sources}, {"kind", s.support_stiffness > 0 ? "elastic" : "held"}, {"stiffness_n_per_mm", s.support_stiffness},
                            {"nodes", options.fixed_nodes}, {"rigid_plausibility_tolerance_mm", s.support_tolerance}};
-    summary["determinacy"] = determinacy(methods, evaluated, rigid_pose_determined);
+    summary["determinacy"] = determined;
+    summary["safeguard"] = {{"flags", result.safeguard.flags}, {"requested", result.safeguard.requested}, {"answer", result.safeguard.answer},
+                            {"setting", s.safeguard}, {"statement", result.safeguard.statement}};
     if (c.truth_mesh) {
         // The pose the ground truth implies, to judge the baselines' rotations by (reports only).
         std::vector<double> truth_rest;

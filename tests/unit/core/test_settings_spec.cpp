@@ -4,6 +4,7 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/settings_spec.hpp"
 #include "physreg/io/settings_file.hpp"
+#include "physreg/registration/compression/compression_registration.hpp"
 #include "physreg/registration/images/image_registration.hpp"
 #include "test_support.hpp"
 
@@ -134,7 +135,8 @@ TEST(SettingsSpec, ImageRegistrationDefaultsAreTheCommandsAndValid)
     EXPECT_EQ(options.rms_tolerance_mm, 0.001);
     EXPECT_TRUE(options.reuse_factor);
     // Every member of the struct is in the specification (a new member needs a new entry).
-    EXPECT_EQ(j.size(), 26u);
+    EXPECT_EQ(j.size(), 27u);
+    EXPECT_EQ(j["initial_max_rotation"], 60.0);
     ImageRegistrationSettings bad;
     bad.method = "rigid";
     bad.baselines = "none";
@@ -143,4 +145,56 @@ TEST(SettingsSpec, ImageRegistrationDefaultsAreTheCommandsAndValid)
     bad.estimate_moduli = false;
     bad.moduli_prior = 2.0;
     EXPECT_EQ(error_of([&] { validate(bad, SettingNaming::option); }), "--moduli-prior 2 needs estimated moduli (--no-moduli is given)");
+}
+
+// Paper 000's modes share the model's entries (one CompressionSettings) and add their own.
+TEST(SettingsSpec, PaperZeroModesShareTheModelEntries)
+{
+    const auto keys = [](const nlohmann::json& j) {
+        std::vector<std::string> out;
+        for (const auto& [k, v] : j.items()) out.push_back(k);
+        return out;
+    };
+    const auto model = keys(estimation_spec().to_json({}));
+    for (const auto& key : {"variant", "region", "grid", "body_modulus", "k_tumour", "k_vessel", "support_radius", "solver", "tool_speed", "tolerance", "residual"}) {
+        EXPECT_TRUE(compression_spec().find(key)) << key;
+        EXPECT_TRUE(estimation_spec().find(key)) << key;
+        EXPECT_TRUE(enrichment_build_spec().find(key)) << key;
+        EXPECT_TRUE(enrichment_apply_spec().find(key)) << key;
+    }
+    // Every member is in its specification: 11 model entries plus each mode's own.
+    EXPECT_EQ(compression_spec().entries().size(), 14u);
+    EXPECT_EQ(estimation_spec().entries().size(), 19u);
+    EXPECT_EQ(enrichment_build_spec().entries().size(), 19u);
+    EXPECT_EQ(enrichment_apply_spec().entries().size(), 15u);
+    EXPECT_EQ(model.size(), 19u);
+    // Defaults are ModelParameters' and PredictionOptions'.
+    const CompressionRegistrationSettings d;
+    const ModelParameters p = d.model_parameters();
+    EXPECT_EQ(p.coupling.parenchyma_tumour_n_per_m, ModelParameters{}.coupling.parenchyma_tumour_n_per_m);
+    EXPECT_EQ(d.prediction_options().tool_speed_per_cell, PredictionOptions{}.tool_speed_per_cell);
+    EXPECT_TRUE(d.model_keys_set().empty());
+    CompressionRegistrationSettings s;
+    s.k_tumour = 77;
+    s.grid = "12x10x6";
+    EXPECT_EQ(s.model_keys_set(), (std::vector<std::string>{"grid", "k_tumour"}));
+    EXPECT_EQ(error_of([&] { validate(s, SettingNaming::key); }), "");
+    s.grid = "12x10";
+    EXPECT_NE(error_of([&] { validate(s, SettingNaming::key); }).find("grid"), std::string::npos);
+    s = {};
+    s.solver = "condensed";
+    EXPECT_EQ(error_of([&] { validate(s, SettingNaming::option); }), "");
+    EstimationSettings e;
+    e.solver = "condensed";
+    EXPECT_EQ(error_of([&] { validate(e, SettingNaming::option); }), "--solver 'condensed': use relaxation or newton");
+    e = {};
+    e.k_min = 10, e.k_max = 5;
+    EXPECT_EQ(error_of([&] { validate(e, SettingNaming::key); }), "k_max 5 N/m must exceed k_min 10 N/m");
+    // Memory sizes: binary suffixes, auto is 0.
+    EXPECT_EQ(parse_memory_size("auto", "m"), 0u);
+    EXPECT_EQ(parse_memory_size("8G", "m"), 8ull << 30);
+    EXPECT_EQ(parse_memory_size("512M", "m"), 512ull << 20);
+    EXPECT_NE(error_of([&] { parse_memory_size("12Q", "--memory-limit"); }).find("--memory-limit must be auto or a positive size"), std::string::npos);
+    EXPECT_EQ(split_names("A,,B,", "--train"), (std::vector<std::string>{"A", "B"}));
+    EXPECT_NE(error_of([&] { split_names(",", "--train"); }).find("--train: no state names"), std::string::npos);
 }

@@ -682,4 +682,51 @@ TEST(SegmentationAlignment, RecoversARigidMotionBetweenFramesAndNamesAnEmptyStru
     EXPECT_NE(test::error_message([&] { parse_initial_alignment("affine"); }).find("--initial 'affine'"), std::string::npos);
 }
 
+namespace {
+// A symmetric ellipsoid gland (semi-axes 24, 16, 12 mm) with a lesion (r 6 mm) at `lesion` (gland
+// coordinates), seen through x ↦ R x + c + t (c its centre), 1.5 mm voxels: half-turned about z,
+// the gland is itself.
+LabelVolume symmetric_gland(const Mat3& r, const Vec3& t, const Vec3& lesion)
+{
+    const Vec3 centre(45, 36, 30);
+    return test::make_volume({60, 48, 40}, [&](int i, int j, int k) {
+        const Vec3 y = 1.5 * Vec3(i + 0.5, j + 0.5, k + 0.5);
+        const Vec3 x = r.transpose() * (y - t - centre);
+        if ((x - lesion).norm() < 6.0) return std::uint16_t(2);
+        return std::uint16_t(std::pow(x[0] / 24, 2) + std::pow(x[1] / 16, 2) + std::pow(x[2] / 12, 2) < 1 ? 1 : 0);
+    }, Vec3::Constant(1.5), Vec3::Zero());
+}
+} // namespace
+
+// Issue 46: the pose is a hypothesis. A near-symmetric gland whose lesion moved (a deformation, not
+// a turn) fits its half-turned self a little better than its true pose: the best fit alone flips
+// it; the default keeps the pose within 60° and reports the flipped one as the runner-up with its
+// margin. A frame truly turned 150° still wins, because there the data resolve it.
+TEST(SegmentationAlignment, ANearSymmetricGlandNeverFlipsYetATrueHalfTurnIsFound)
+{
+    const Vec3 centre(45, 36, 30);
+    const Mat3 turn10 = Eigen::AngleAxisd(10.0 * M_PI / 180, Vec3::UnitZ()).toRotationMatrix();
+    const LabelVolume moving = symmetric_gland(Mat3::Identity(), Vec3::Zero(), Vec3(8, 4, 2));
+    // The lesion deformed toward where the half turn would put it: (−8, −4, 2) is the flip's.
+    const LabelVolume fixed = symmetric_gland(turn10, Vec3::Zero(), Vec3(-1, -1, 2)); // turned about its centre
+    const SegmentationAlignment best_fit = align_segmentations(fixed, moving, {1, 2}, InitialAlignment::rigid, 180.0);
+    const SegmentationAlignment kept = align_segmentations(fixed, moving, {1, 2}, InitialAlignment::rigid);
+    EXPECT_GT(best_fit.rotation_deg, 120.0) << best_fit.decision;
+    EXPECT_LT(kept.rotation_deg, 30.0) << kept.decision;
+    EXPECT_NE(kept.decision.find("not by the margin the data resolve"), std::string::npos) << kept.decision;
+    ASSERT_FALSE(kept.runner_up.empty());
+    EXPECT_GT(kept.runner_up_rotation_deg, 120.0);
+    EXPECT_LT(kept.runner_up_margin_mm, 0.0) << "the flipped pose fits a little better";
+    EXPECT_EQ(kept.hypotheses.size(), 5u);
+
+    // A frame truly turned 150° about z (the lesion where it was): the far pose wins by evidence.
+    const Mat3 turn150 = Eigen::AngleAxisd(150.0 * M_PI / 180, Vec3::UnitZ()).toRotationMatrix();
+    const LabelVolume turned = symmetric_gland(turn150, Vec3::Zero(), Vec3(8, 4, 2));
+    const SegmentationAlignment far = align_segmentations(turned, moving, {1, 2}, InitialAlignment::rigid);
+    EXPECT_NEAR(far.rotation_deg, 150.0, 2.0) << far.decision;
+    EXPECT_NE(far.decision.find("less than half"), std::string::npos) << far.decision;
+    EXPECT_NE(test::error_message([&] { align_segmentations(fixed, moving, {1, 2}, InitialAlignment::rigid, 0.0); }).find("(0, 180]"),
+              std::string::npos);
+}
+
 } // namespace physreg

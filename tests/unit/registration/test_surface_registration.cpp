@@ -636,3 +636,48 @@ TEST(SurfaceRegistration, ForcesThatInvertElementsBackTheMethodOffInsteadOfEndin
 }
 
 } // namespace physreg
+
+#include "physreg/registration/surface/partial_surface_registration.hpp"
+
+namespace physreg {
+
+// Issue 46 item 5: the safeguard's judgement on hand-made figures (mean cloud-to-model distance, mm).
+TEST(PartialSurfaceSafeguard, ADeformableAnswerThatFitsWorseThanTheRigidFitGivesWay)
+{
+    const auto methods = [](double rest, double rigid, double bio) {
+        return nlohmann::json{{"at_rest", {{"cloud_to_model_mm", {{"mean", rest}}}}},
+                              {"rigid", {{"cloud_to_model_mm", {{"mean", rigid}}}}},
+                              {"biomechanical", {{"cloud_to_model_mm", {{"mean", bio}}}}}};
+    };
+    const nlohmann::json determined = {{"pose_determined", true}, {"notes", nlohmann::json::array()}};
+    // The issue's case: biomechanical 11.5 mm from the cloud, rigid 8.8, at rest 12: the rigid fit is written.
+    const auto worse = judge_deformable_answer(methods(12.0, 8.8, 11.5), determined, true, "biomechanical", "conservative");
+    ASSERT_EQ(worse.flags.size(), 1u);
+    EXPECT_NE(worse.flags[0].find("worse than the rigid fit (11.50 against 8.80 mm"), std::string::npos) << worse.flags[0];
+    EXPECT_EQ(worse.answer, "rigid");
+    EXPECT_NE(worse.statement.find("safeguard keep writes biomechanical anyway"), std::string::npos) << worse.statement;
+    // keep: flagged, kept.
+    const auto kept = judge_deformable_answer(methods(12.0, 8.8, 11.5), determined, true, "biomechanical", "keep");
+    EXPECT_EQ(kept.answer, "biomechanical");
+    EXPECT_EQ(kept.flags.size(), 1u);
+    // Worse than at rest too, and the rigid starts disagree: the model at rest is written.
+    const auto both = judge_deformable_answer(methods(5.0, 4.0, 6.0), determined, false, "biomechanical", "conservative");
+    EXPECT_EQ(both.flags.size(), 2u);
+    EXPECT_EQ(both.answer, "at_rest");
+    // A rigid fit worse than rest: rest is the conservative answer.
+    EXPECT_EQ(judge_deformable_answer(methods(5.0, 7.0, 8.0), determined, true, "biomechanical", "conservative").answer, "at_rest");
+    // Within the tolerance (5 % and 0.1 mm): no flag. 0.84 against 0.80 is 5 % but only 0.04 mm.
+    const auto close = judge_deformable_answer(methods(5.0, 0.80, 0.84), determined, true, "biomechanical", "conservative");
+    EXPECT_TRUE(close.flags.empty()) << close.statement;
+    EXPECT_EQ(close.answer, "biomechanical");
+    // The data do not determine the pose: flagged even when the fit is good.
+    const nlohmann::json undetermined = {{"pose_determined", false}, {"notes", {"biomechanical and adjoint fit the cloud alike but place the model 6 mm apart"}}};
+    const auto alike = judge_deformable_answer(methods(5.0, 2.0, 0.5), undetermined, true, "biomechanical", "conservative");
+    ASSERT_EQ(alike.flags.size(), 1u);
+    EXPECT_NE(alike.flags[0].find("6 mm apart"), std::string::npos);
+    EXPECT_EQ(alike.answer, "rigid");
+    // A rigid answer asked for is not judged.
+    EXPECT_TRUE(judge_deformable_answer(methods(5.0, 7.0, 8.0), determined, true, "rigid", "conservative").flags.empty());
+}
+
+} // namespace physreg

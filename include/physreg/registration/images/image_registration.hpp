@@ -36,6 +36,7 @@ struct ImageRegistrationSettings {
     std::string method = "biomechanical";   ///< the result written: biomechanical, rigid, demons, bspline
     std::string initial = "rigid";          ///< identity, centroid, rigid
     double initial_min_reduction = 0.5;     ///< fraction of the boundary RMS distance the alignment must remove
+    double initial_max_rotation = 60.0;     ///< degrees: a pose turned farther from the identity must win by a margin the data resolve
     std::string baselines = "all";          ///< all, intensity, labels, none
     std::string hold = "auto";              ///< posterior, none, auto (ImagePair::auto_hold)
     std::vector<std::int32_t> structures;   ///< empty: every label of the moving segmentation

@@ -4,8 +4,13 @@
 // differ (pre-operative MR and intra-operative ultrasound, two CT scans), so the mechanics only has
 // the non-rigid part to explain. Centroids of the structures, then (mode rigid) Gauss–Newton on
 // the fixed structures' signed distance maps: Σ_structures Σ_boundary points φ_s(R x + t)², started
-// from the centroid alignment and from the four right-handed matches of the principal axes; the
-// start with the lowest final cost wins. Written here rather than with ITK's rigid registration of
+// from the centroid alignment and from the four right-handed matches of the principal axes. Each
+// start's pose is a hypothesis (issue 46): frames of one patient rarely differ by more than a few
+// tens of degrees, and a near-symmetric organ (prostate, kidney) fits its half-turned self almost
+// as well as itself. So the best pose within `max_plausible_rotation_deg` of the identity wins
+// unless a pose farther out fits the boundaries at most half as far and closer by more than a
+// voxel of the fixed image (a margin the data resolve); every hypothesis, the runner-up and the
+// margin are reported. Written here rather than with ITK's rigid registration of
 // label images because the distance-map cost needs no overlap to start from and gives each
 // structure its own term.
 #include "physreg/core/types.hpp"
@@ -20,6 +25,14 @@ enum class InitialAlignment { identity, centroid, rigid };
 InitialAlignment parse_initial_alignment(const std::string& text); ///< identity | centroid | rigid
 std::string to_string(InitialAlignment mode);
 
+/// One start's refined pose.
+struct AlignmentHypothesis {
+    std::string start;                   ///< centroids, principal axes 0 … 3
+    double rms_boundary_distance_mm = 0.0;
+    double rotation_deg = 0.0;           ///< of the refined pose from the identity
+    bool plausible = true;               ///< rotation within max_plausible_rotation_deg
+};
+
 /// x_fixed = rotation · x_moving + translation (mm, LPS).
 struct SegmentationAlignment {
     InitialAlignment mode = InitialAlignment::identity;
@@ -31,13 +44,19 @@ struct SegmentationAlignment {
     double rms_boundary_distance_before_mm = 0.0;
     std::string start;                   ///< the winning start (rigid)
     int iterations = 0;
+    std::vector<AlignmentHypothesis> hypotheses; ///< rigid: every start's pose
+    std::string decision;                ///< rigid: why the winner won
+    std::string runner_up;               ///< rigid: the best other pose (a start ending more than 5° away)
+    double runner_up_margin_mm = 0.0;    ///< its RMS boundary distance minus the winner's (< 0: it fits better)
+    double runner_up_rotation_deg = 0.0; ///< between the winner and the runner-up
     Vec3 apply(const Vec3& x) const { return rotation * x + translation; }
 };
 
 /// Aligns the `structures` of `moving` to those of `fixed`. Throws Error naming the structure when a
 /// structure is empty in either segmentation (nothing to match).
+/// `max_plausible_rotation_deg`: see above (> 0; 180 trusts the best fit alone).
 SegmentationAlignment align_segmentations(const LabelVolume& fixed, const LabelVolume& moving, const std::vector<std::int32_t>& structures,
-                                          InitialAlignment mode);
+                                          InitialAlignment mode, double max_plausible_rotation_deg = 60.0);
 
 class SignedDistanceMap;
 /// The rigid motion that brings each structure's `points` (e.g. a model's boundary nodes) nearest

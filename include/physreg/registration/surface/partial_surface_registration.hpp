@@ -35,6 +35,7 @@ namespace physreg {
 /// vessel_scale, vessel_radius) are read where a case is made from files.
 struct PartialSurfaceSettings {
     std::string method = "biomechanical";     ///< the result written: biomechanical, adjoint, rigid, icp
+    std::string safeguard = "conservative";   ///< conservative: a flagged deformable result gives way to rigid or rest; keep
     std::string model_kind = "homogeneous";   ///< homogeneous, heterogeneous (capsule and vessels)
     double capsule_thickness = 0.1;           ///< mm
     std::string material = "healthy";         ///< healthy (3.5 kPa), cirrhotic (30 kPa)
@@ -98,16 +99,35 @@ struct PartialSurfaceMethod {
     nlohmann::json details = nlohmann::json::object();
 };
 
+/// What the safeguard found (issue 46): reasons to distrust the deformable answer, judged without
+/// the truth, and what was written instead.
+struct PartialSurfaceSafeguard {
+    std::vector<std::string> flags;            ///< empty: nothing found
+    std::string requested;                     ///< settings.method
+    std::string answer;                        ///< the method whose result is written
+    std::string statement;                     ///< one sentence for the log and the report
+};
+
 struct PartialSurfaceResult {
     PartialSurfaceSettings settings;
     std::vector<PartialSurfaceMethod> methods;
-    std::size_t chosen = 0;
+    std::size_t chosen = 0;                    ///< the answer: settings.method, or what the safeguard put in its place
+    PartialSurfaceSafeguard safeguard;
     std::vector<std::int32_t> support_nodes;
     std::optional<LandmarkSet> landmarks;      ///< the targets through the chosen result
     ImageGeometry field_geometry;              ///< where displacement.nii.gz is sampled
     nlohmann::json summary;                    ///< summary.json, as written
     const PartialSurfaceMethod& chosen_method() const { return methods.at(chosen); }
 };
+
+/// The safeguard's judgement, as register_partial_surface makes it: `evaluated` holds per method
+/// name {"cloud_to_model_mm": {"mean": …}} (at_rest, and rigid when run); `determinacy` is
+/// {"pose_determined": bool, "notes": [...]}. A deformable `requested` answer (biomechanical,
+/// adjoint) fitting the cloud worse than the rigid fit or than at rest (by more than 5 % and
+/// 0.1 mm), or undetermined, is flagged; `setting` conservative then answers rigid (at rest when
+/// that fits better or `rigid_pose_determined` is false), keep keeps it.
+PartialSurfaceSafeguard judge_deformable_answer(const nlohmann::json& evaluated, const nlohmann::json& determinacy, bool rigid_pose_determined,
+                                                const std::string& requested, const std::string& setting);
 
 /// Runs the pipeline. `progress(fraction, message)`. Throws Error for bad input (supports off the
 /// model, a cloud far from it) and when the chosen method fails.
