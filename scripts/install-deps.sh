@@ -19,6 +19,7 @@ packages=(
   libcgal-dev              # CGAL Mesh_3: conforming tetrahedral meshes of label volumes (ground-truth phantom)
   libnlopt-cxx-dev         # BOBYQA / Nelder–Mead: parameter estimation
   libfftw3-dev             # linked by ITK's registration modules (Demons, B-spline baselines)
+  libopenigtlink-dev       # OpenIGTLink 1.11 (BSD): physreg serve's messages to trackers and 3D Slicer
   liblbfgs-dev             # L-BFGS (Nocedal; MIT): paper 002's moduli and boundary-force estimation
   libopenmpi-dev openmpi-bin # enrichment database builds across processes (mpirun)
   zlib1g-dev               # compressed VTU arrays

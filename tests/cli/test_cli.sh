@@ -48,7 +48,7 @@ env -u GOMP_SPINCOUNT OMP_WAIT_POLICY=passive OMP_DISPLAY_ENV=verbose "$physreg"
   grep -q "OMP_WAIT_POLICY = 'PASSIVE'" "$work/err.txt" && ! grep -q "GOMP_SPINCOUNT = '1000'" "$work/err.txt" && pass ||
   failed "OMP_WAIT_POLICY=passive is kept without a spin count of ours"
 expect_ok "--help" "$physreg" --help
-for sub in mesh coarsen info convert demo phantom estimate register-compression register-surface register-images evaluate "landmarks locate" "enrich build" "enrich apply" "bench enrich"; do
+for sub in mesh coarsen info convert demo phantom estimate register-compression register-surface register-images evaluate "landmarks locate" "enrich build" "enrich apply" "bench enrich" serve settings; do
   expect_ok "$sub --help" "$physreg" $sub --help
 done
 

@@ -1,0 +1,387 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+// physreg serve (issue 44, first part): paper 000 live over OpenIGTLink. A TCP server that a tracker
+// or a navigation display (3D Slicer's OpenIGTLinkIF, PLUS) connects to: each TRANSFORM named after
+// the tool moves the body model by condensed contact (the latest pose wins, stale ones are dropped),
+// and the answer goes back as POLYDATA per organ surface (fixed topology, point scalar
+// displacement_mm) and POINT for the targets, stamped with the input's timestamp. STRING CMD_<id>
+// (PLUS's command form, XML body with Name="…") is answered ACK_<id>: status, reset. STATUS is
+// ignored, unknown types are skipped by their body size. Headers of version 1 and 2 are read here
+// (the 1.11 library cannot unpack version 2, which Slicer sends); answers use version 1, packed
+// by Debian's libopenigtlink.
+#include "cli_support.hpp"
+#include "settings_options.hpp"
+
+#include "physreg/core/error.hpp"
+#include "physreg/core/log.hpp"
+#include "physreg/io/dataset.hpp"
+#include "physreg/mesh/faces.hpp"
+#include "physreg/registration/compression/compression_registration.hpp"
+
+#include <igtlPointMessage.h>
+#include <igtlPolyDataMessage.h>
+#include <igtlStatusMessage.h>
+#include <igtlStringMessage.h>
+#include <igtl_util.h>
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <set>
+
+namespace physreg::cli {
+namespace {
+
+constexpr std::size_t header_size = 58;
+
+std::uint64_t read_be(const std::uint8_t* p, int bytes)
+{
+    std::uint64_t v = 0;
+    for (int i = 0; i < bytes; ++i) v = (v << 8) | p[i];
+    return v;
+}
+
+float read_float_be(const std::uint8_t* p)
+{
+    const auto bits = static_cast<std::uint32_t>(read_be(p, 4));
+    float f;
+    std::memcpy(&f, &bits, 4);
+    return f;
+}
+
+std::string fixed_string(const std::uint8_t* p, std::size_t n)
+{
+    std::size_t len = 0;
+    while (len < n && p[len] != 0) ++len;
+    return std::string(reinterpret_cast<const char*>(p), len);
+}
+
+struct Message {
+    int version = 1;
+    std::string type, device;
+    std::uint64_t timestamp = 0;  ///< OpenIGTLink's 32.32 fixed point seconds
+    std::vector<std::uint8_t> content; ///< the body without version 2's extended header and metadata
+};
+
+/// Closes the descriptor when it goes.
+class Descriptor {
+public:
+    explicit Descriptor(int fd = -1) : m_fd(fd) {}
+    ~Descriptor()
+    {
+        if (m_fd >= 0) ::close(m_fd);
+    }
+    Descriptor(const Descriptor&) = delete;
+    Descriptor& operator=(const Descriptor&) = delete;
+    int get() const { return m_fd; }
+
+private:
+    int m_fd;
+};
+
+bool read_exact(int fd, std::uint8_t* out, std::size_t n)
+{
+    while (n > 0) {
+        const ssize_t got = ::recv(fd, out, n, 0);
+        if (got <= 0) return false;
+        out += got;
+        n -= static_cast<std::size_t>(got);
+    }
+    return true;
+}
+
+bool send_all(int fd, const void* data, std::size_t n)
+{
+    const auto* p = static_cast<const std::uint8_t*>(data);
+    while (n > 0) {
+        const ssize_t sent = ::send(fd, p, n, MSG_NOSIGNAL);
+        if (sent <= 0) return false;
+        p += sent;
+        n -= static_cast<std::size_t>(sent);
+    }
+    return true;
+}
+
+/// One message: the 58-byte header (version 1 or 2), the body checked against its CRC-64, the
+/// content without version 2's extended header and metadata. Nothing (end of stream) when the
+/// client has gone; Error for a corrupt message.
+std::optional<Message> read_message(int fd)
+{
+    std::uint8_t h[header_size];
+    if (!read_exact(fd, h, header_size)) return std::nullopt;
+    Message m;
+    m.version = static_cast<int>(read_be(h, 2));
+    m.type = fixed_string(h + 2, 12);
+    m.device = fixed_string(h + 14, 20);
+    m.timestamp = read_be(h + 34, 8);
+    const std::uint64_t body_size = read_be(h + 42, 8), crc = read_be(h + 50, 8);
+    if (m.version < 1 || m.version > 2) fail("OpenIGTLink: header version {} (this server reads 1 and 2)", m.version);
+    if (body_size > (std::uint64_t(1) << 31)) fail("OpenIGTLink: {} message '{}' announces {} bytes", m.type, m.device, body_size);
+    std::vector<std::uint8_t> body(body_size);
+    if (body_size > 0 && !read_exact(fd, body.data(), body_size)) return std::nullopt;
+    if (crc64(body.data(), body_size, 0) != crc) fail("OpenIGTLink: {} message '{}': CRC mismatch", m.type, m.device);
+    std::size_t begin = 0, end = body.size();
+    if (m.version == 2) {
+        if (body_size < 12) fail("OpenIGTLink: version 2 {} message '{}' shorter than its extended header", m.type, m.device);
+        const std::size_t extended = read_be(body.data(), 2), meta_header = read_be(body.data() + 2, 2), meta = read_be(body.data() + 4, 4);
+        if (extended < 12 || extended + meta_header + meta > body_size)
+            fail("OpenIGTLink: version 2 {} message '{}': extended header and metadata larger than the body", m.type, m.device);
+        begin = extended;
+        end = body_size - meta_header - meta;
+    }
+    m.content.assign(body.begin() + static_cast<std::ptrdiff_t>(begin), body.begin() + static_cast<std::ptrdiff_t>(end));
+    return m;
+}
+
+/// True when more bytes wait on the socket (another message behind this one).
+bool more_waiting(int fd)
+{
+    pollfd p{fd, POLLIN, 0};
+    return ::poll(&p, 1, 0) > 0 && (p.revents & POLLIN);
+}
+
+/// The surfaces a display shows: per organ the faces of its cells that border other tissue or
+/// nothing, with their nodes.
+struct OrganSurface {
+    std::string name;
+    std::vector<std::int32_t> nodes;                    ///< model node per surface point
+    std::vector<std::vector<std::uint32_t>> polygons;   ///< surface point indices
+};
+
+std::vector<OrganSurface> organ_surfaces(const LiverModel& model, const LabelRoles& roles)
+{
+    std::vector<std::pair<std::string, std::set<std::int32_t>>> organs;
+    std::set<std::int32_t> liver(roles.liver.begin(), roles.liver.end());
+    liver.insert(roles.lesion.begin(), roles.lesion.end());
+    liver.insert(roles.vessel.begin(), roles.vessel.end());
+    organs.push_back({"liver", liver});
+    if (!roles.lesion.empty()) organs.push_back({"tumours", roles.lesion});
+    if (!roles.vessel.empty()) organs.push_back({"vessels", roles.vessel});
+    const auto faces = match_faces(model.mesh);
+    std::vector<OrganSurface> out;
+    for (const auto& [name, labels] : organs) {
+        OrganSurface s{name, {}, {}};
+        std::map<std::int32_t, std::uint32_t> index;
+        for (const auto& f : faces) {
+            const bool inside = labels.count(model.mesh.cell_labels[f.cell]) > 0;
+            const bool other = f.neighbour < 0 || labels.count(model.mesh.cell_labels[f.neighbour]) == 0;
+            if (!inside || !other) continue;
+            std::vector<std::uint32_t> polygon;
+            for (int k = 0; k < f.node_count(); ++k) {
+                const auto [it, added] = index.emplace(f.nodes[k], static_cast<std::uint32_t>(s.nodes.size()));
+                if (added) s.nodes.push_back(f.nodes[k]);
+                polygon.push_back(it->second);
+            }
+            s.polygons.push_back(std::move(polygon));
+        }
+        if (!s.polygons.empty()) out.push_back(std::move(s));
+    }
+    return out;
+}
+
+void send_message(int fd, igtl::MessageBase* m)
+{
+    m->Pack();
+    if (!send_all(fd, m->GetPackPointer(), static_cast<std::size_t>(m->GetPackSize()))) fail("OpenIGTLink: the client went away while answering");
+}
+
+void stamp(igtl::MessageBase* m, std::uint64_t timestamp)
+{
+    m->SetTimeStamp(static_cast<unsigned int>(timestamp >> 32), static_cast<unsigned int>(timestamp & 0xffffffffu));
+}
+
+/// The attribute value Name="…" of a PLUS command's XML body ("" when absent).
+std::string xml_attribute(const std::string& xml, const std::string& attribute)
+{
+    const auto at = xml.find(attribute + "=\"");
+    if (at == std::string::npos) return "";
+    const auto begin = at + attribute.size() + 2, end = xml.find('"', begin);
+    return end == std::string::npos ? "" : xml.substr(begin, end - begin);
+}
+
+} // namespace
+
+void add_subcommand_serve(CLI::App& app)
+{
+    struct Options : CommonOptions {
+        std::string dataset, parameters, host = "127.0.0.1", frame = "ras", tool = "tool", record;
+        int port = 0;
+        bool once = false;
+    };
+    auto o = std::make_shared<Options>();
+    auto* sub = app.add_subcommand("serve", "Paper 000 live over OpenIGTLink: tool poses (TRANSFORM) in, the body model's organ surfaces "
+                                            "(POLYDATA) and targets (POINT) out, by condensed contact");
+    sub->add_option("--dataset", o->dataset, "Phantom dataset: the body at rest, its landmarks, the tool and the session's paths")->required();
+    sub->add_option("--parameters", o->parameters, "Parameter file from physreg estimate (else the model settings)");
+    auto settings = std::make_shared<SettingsOptions<CompressionRegistrationSettings>>(sub, compression_spec());
+    sub->add_option("--port", o->port, "TCP port to listen on (Slicer and PLUS default to 18944; give it only when asked)")->required();
+    sub->add_option("--host", o->host, "Address to listen on (default 127.0.0.1; 0.0.0.0 for every interface)");
+    sub->add_option("--frame", o->frame, "Coordinates on the wire: ras (3D Slicer's, default) or lps (the images')");
+    sub->add_option("--tool", o->tool, "Device name of the tool's TRANSFORM (default 'tool'); other transforms are ignored");
+    sub->add_option("--record", o->record, "Write every message in and out (type, device, timestamp, wall time) as JSON lines");
+    sub->add_flag("--once", o->once, "Stop when the first client disconnects (tests, scripts)");
+    sub->callback([o, settings] {
+        if (o->port < 1 || o->port > 65535) fail("--port {} must lie in 1 … 65535", o->port);
+        if (o->frame != "ras" && o->frame != "lps") fail("--frame '{}': use ras or lps", o->frame);
+        const CompressionRegistrationSettings s = settings->resolve();
+        validate(s, SettingNaming::option);
+        const auto t0 = std::chrono::steady_clock::now();
+        const PhantomDataset dataset = read_phantom_dataset(o->dataset);
+        const CompressionSubject subject = read_dataset_compression_subject(o->dataset, s, o->parameters);
+        const LiverModel& model = subject.model;
+        std::vector<Indenter> session_tools;
+        for (const auto& st : dataset.states)
+            if (st.tool && st.kind == "compression") session_tools.push_back(*st.tool);
+        if (session_tools.empty()) fail("serve: dataset '{}' has no tool compression (the tool's shape and the session's paths)", o->dataset);
+        const Indenter tool_shape = session_tools.front();
+        // The nodes each update returns: every organ surface's, and those the targets read.
+        const auto surfaces = organ_surfaces(model, subject.roles);
+        std::set<std::int32_t> wanted;
+        for (const auto& surface : surfaces) wanted.insert(surface.nodes.begin(), surface.nodes.end());
+        std::vector<Vec3> targets;
+        for (const auto& l : subject.rest_landmarks) targets.push_back(l.position);
+        for (const auto n : nodes_near(model.mesh, targets, 2.0 * model.cell_size_mm.maxCoeff())) wanted.insert(n);
+        CondensedContactOptions condensed_options;
+        condensed_options.memory_limit_bytes = s.memory_limit_bytes();
+        CondensedContactModel condensed(model, session_tools, std::vector<std::int32_t>(wanted.begin(), wanted.end()), condensed_options);
+        std::vector<std::int64_t> query_index(model.mesh.node_count(), -1);
+        for (std::size_t i = 0; i < condensed.query_nodes().size(); ++i) query_index[condensed.query_nodes()[i]] = static_cast<std::int64_t>(i);
+        const double ready_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        const double wire = o->frame == "ras" ? -1.0 : 1.0; // RAS ↔ LPS: x and y change sign
+
+        Descriptor listener(::socket(AF_INET, SOCK_STREAM, 0));
+        if (listener.get() < 0) fail("serve: cannot open a socket: {}", std::strerror(errno));
+        const int yes = 1;
+        ::setsockopt(listener.get(), SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+        sockaddr_in address{};
+        address.sin_family = AF_INET;
+        address.sin_port = htons(static_cast<std::uint16_t>(o->port));
+        if (::inet_pton(AF_INET, o->host.c_str(), &address.sin_addr) != 1) fail("--host '{}' is not an IPv4 address", o->host);
+        if (::bind(listener.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0)
+            fail("--port {}: cannot listen on {}:{}: {}", o->port, o->host, o->port, std::strerror(errno));
+        ::listen(listener.get(), 1);
+        std::ofstream record;
+        if (!o->record.empty()) {
+            record.open(o->record);
+            if (!record) fail("--record '{}': cannot write", o->record);
+        }
+        const auto log_message = [&](const char* direction, const std::string& type, const std::string& device, std::uint64_t timestamp) {
+            if (!record) return;
+            const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+            record << nlohmann::json{{"direction", direction}, {"type", type}, {"device", device}, {"timestamp", timestamp}, {"wall_s", wall}}.dump() << "\n";
+            record.flush();
+        };
+        logger()->info("serve: model {} nodes, {} candidate skin nodes, {} surface and target nodes; ready in {:.1f} s, listening on {}:{} ({} frame)",
+                       model.mesh.node_count(), condensed.precomputation().candidate_nodes, condensed.query_nodes().size(), ready_s, o->host,
+                       o->port, o->frame);
+        std::cerr << fmt::format("serve: listening on {}:{}\n", o->host, o->port) << std::flush;
+        int updates = 0;
+        do {
+            Descriptor client(::accept(listener.get(), nullptr, nullptr));
+            if (client.get() < 0) fail("serve: accept failed: {}", std::strerror(errno));
+            ::setsockopt(client.get(), IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+            logger()->info("serve: a client connected");
+            std::optional<Message> pending; // read while dropping stale poses, not answered yet
+            while (true) {
+                auto message = pending ? std::move(pending) : read_message(client.get());
+                pending.reset();
+                if (!message) break;
+                log_message("in", message->type, message->device, message->timestamp);
+                if (message->type == "TRANSFORM" && message->device == o->tool) {
+                    // The latest pose wins: poses queued behind this one replace it unanswered.
+                    int dropped = 0;
+                    while (more_waiting(client.get())) {
+                        auto next = read_message(client.get());
+                        if (!next) break;
+                        if (next->type != "TRANSFORM" || next->device != o->tool) {
+                            pending = std::move(next); // answered after this pose, in order
+                            break;
+                        }
+                        log_message("in", next->type, next->device, next->timestamp);
+                        message = std::move(next);
+                        ++dropped;
+                    }
+                    if (message->content.size() < 48) fail("OpenIGTLink: TRANSFORM '{}' holds {} bytes, not 48", message->device, message->content.size());
+                    const Vec3 position(wire * read_float_be(message->content.data() + 36), wire * read_float_be(message->content.data() + 40),
+                                        read_float_be(message->content.data() + 44));
+                    const auto started = std::chrono::steady_clock::now();
+                    const auto update = condensed.move_to(tool_shape, position);
+                    const std::vector<double> u = condensed.query_field_mm();
+                    const LandmarkSet moved = move_landmarks(model, u, subject.rest_landmarks);
+                    for (const auto& surface : surfaces) {
+                        auto points = igtl::PolyDataPointArray::New();
+                        auto polygons = igtl::PolyDataCellArray::New();
+                        auto magnitude = igtl::PolyDataAttribute::New();
+                        std::vector<igtlFloat32> values;
+                        for (const auto n : surface.nodes) {
+                            const Vec3 d(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
+                            const Vec3 x = model.mesh.nodes[n] + d;
+                            points->AddPoint(static_cast<igtlFloat32>(wire * x[0]), static_cast<igtlFloat32>(wire * x[1]), static_cast<igtlFloat32>(x[2]));
+                            values.push_back(static_cast<igtlFloat32>(d.norm()));
+                        }
+                        for (auto polygon : surface.polygons) polygons->AddCell(static_cast<int>(polygon.size()), polygon.data());
+                        magnitude->SetType(igtl::PolyDataAttribute::POINT_SCALAR);
+                        magnitude->SetName("displacement_mm");
+                        magnitude->SetSize(static_cast<igtlUint32>(values.size()));
+                        magnitude->SetData(values.data());
+                        auto reply = igtl::PolyDataMessage::New();
+                        reply->SetDeviceName(surface.name.c_str());
+                        reply->SetPoints(points);
+                        reply->SetPolygons(polygons);
+                        reply->AddAttribute(magnitude);
+                        stamp(reply, message->timestamp);
+                        send_message(client.get(), reply);
+                        log_message("out", "POLYDATA", surface.name, message->timestamp);
+                    }
+                    auto targets_message = igtl::PointMessage::New();
+                    targets_message->SetDeviceName("targets");
+                    for (const auto& l : moved) {
+                        auto e = igtl::PointElement::New();
+                        e->SetName(l.name.c_str());
+                        e->SetGroupName(to_string(l.type).c_str());
+                        e->SetPosition(static_cast<igtlFloat32>(wire * l.position[0]), static_cast<igtlFloat32>(wire * l.position[1]),
+                                       static_cast<igtlFloat32>(l.position[2]));
+                        targets_message->AddPointElement(e);
+                    }
+                    stamp(targets_message, message->timestamp);
+                    send_message(client.get(), targets_message);
+                    log_message("out", "POINT", "targets", message->timestamp);
+                    ++updates;
+                    logger()->debug("serve: update {} at ({:.1f}, {:.1f}, {:.1f}) mm LPS: {} nodes in contact, {:.2f} ms ({} stale poses dropped)", updates,
+                                    position[0], position[1], position[2], update.active_nodes,
+                                    std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count(), dropped);
+                } else if (message->type == "STRING" && message->device.rfind("CMD_", 0) == 0) {
+                    const std::string xml = message->content.size() > 4 ? std::string(message->content.begin() + 4, message->content.end()) : "";
+                    const std::string command = xml_attribute(xml, "Name");
+                    std::string answer;
+                    if (command == "reset") {
+                        condensed.reset();
+                        answer = "<Command Status=\"SUCCESS\" Message=\"the model is at rest\"/>";
+                    } else if (command == "status") {
+                        answer = fmt::format("<Command Status=\"SUCCESS\" Updates=\"{}\" Nodes=\"{}\" Frame=\"{}\"/>", updates, model.mesh.node_count(), o->frame);
+                    } else {
+                        answer = fmt::format("<Command Status=\"FAIL\" Message=\"unknown command '{}' (reset, status)\"/>", command);
+                    }
+                    auto ack = igtl::StringMessage::New();
+                    ack->SetDeviceName(("ACK_" + message->device.substr(4)).c_str());
+                    ack->SetString(answer.c_str());
+                    stamp(ack, message->timestamp);
+                    send_message(client.get(), ack);
+                    log_message("out", "STRING", "ACK_" + message->device.substr(4), message->timestamp);
+                }
+                // STATUS (Slicer sends one on connecting), other devices and unknown types: skipped.
+            }
+            logger()->info("serve: the client disconnected after {} updates", updates);
+        } while (!o->once);
+    });
+}
+
+} // namespace physreg::cli

@@ -1,0 +1,181 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""physreg serve (issue 44, first part) driven as a tracker and a display would: a client written
+here from the OpenIGTLink specification (not with the server's library) sends tool poses, a STATUS
+with a version-2 header as Slicer does on connecting, and a PLUS-style command, and reads the organ
+surfaces and the targets back. The targets must be where register-compression --solver condensed
+puts them for the same final pose (the same linear model and contact problem)."""
+import json
+import os
+import socket
+import struct
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+import physreg
+from conftest import skip_or_fail
+
+GRID = "27x20x13"
+
+_TABLE = []
+for _i in range(256):
+    _c = _i << 56
+    for _ in range(8):
+        _c = ((_c << 1) ^ 0x42F0E1EBA9EA3693) if _c & (1 << 63) else (_c << 1)
+        _c &= 0xFFFFFFFFFFFFFFFF
+    _TABLE.append(_c)
+
+
+def crc64(data):
+    """CRC-64 ECMA-182 as OpenIGTLink computes it (no reflection, zero start)."""
+    crc = 0
+    for b in data:
+        crc = _TABLE[((crc >> 56) ^ b) & 0xFF] ^ ((crc << 8) & 0xFFFFFFFFFFFFFFFF)
+    return crc
+
+
+def message(kind, device, body, timestamp, version=1):
+    if version == 2:  # extended header (12 bytes), content, no metadata
+        body = struct.pack(">HHIi", 12, 0, 0, 0) + body
+    header = struct.pack(">H12s20sQQQ", version, kind.encode(), device.encode(), timestamp, len(body), crc64(body))
+    return header + body
+
+
+def command(device, text, timestamp):
+    """A PLUS-style command: STRING named CMD_<id>, US-ASCII (3), its XML."""
+    data = text.encode()
+    return message("STRING", device, struct.pack(">HH", 3, len(data)) + data, timestamp)
+
+
+def transform(position_ras, timestamp, device="tool", version=1):
+    x, y, z = position_ras
+    body = struct.pack(">12f", 1, 0, 0, 0, 1, 0, 0, 0, 1, x, y, z)
+    return message("TRANSFORM", device, body, timestamp, version)
+
+
+def read_message(sock):
+    header = b""
+    while len(header) < 58:
+        chunk = sock.recv(58 - len(header))
+        assert chunk, "the server closed the connection"
+        header += chunk
+    version, kind, device, timestamp, size, crc = struct.unpack(">H12s20sQQQ", header)
+    body = b""
+    while len(body) < size:
+        chunk = sock.recv(size - len(body))
+        assert chunk
+        body += chunk
+    assert version == 1 and crc64(body) == crc, (version, kind)
+    return kind.rstrip(b"\0").decode(), device.rstrip(b"\0").decode(), timestamp, body
+
+
+def targets_from(body):
+    """POINT elements: name 64, group 32, RGBA 4, position 3 × float32, radius, owner 20."""
+    out = {}
+    for at in range(0, len(body), 136):
+        name = body[at:at + 64].rstrip(b"\0").decode()
+        out[name] = np.array(struct.unpack(">3f", body[at + 100:at + 112]), dtype=float)
+    return out
+
+
+@pytest.fixture(scope="module")
+def server(dataset, program):
+    if not program:
+        skip_or_fail("the physreg program is needed to run the server")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    p = subprocess.Popen([program, "--log-level", "warn", "serve", "--dataset", str(dataset), "--grid", GRID, "--port", str(port), "--once"],
+                         stderr=subprocess.PIPE, text=True)
+    line = p.stderr.readline()
+    assert "listening" in line, line
+    sock = socket.create_connection(("127.0.0.1", port), timeout=60)
+    yield sock
+    sock.close()
+    p.wait(timeout=60)
+    assert p.returncode == 0, p.stderr.read()
+
+
+def final_pose_lps(dataset, state):
+    manifest = json.loads((dataset / "manifest.json").read_text())
+    return np.array(next(s for s in manifest["states"] if s["name"] == state)["tool"]["final_position_mm"], dtype=float)
+
+
+def test_a_tool_pose_moves_the_model_as_the_command_does(server, dataset):
+    sock = server
+    # Slicer's first words: a STATUS with a version-2 header; the server skips it.
+    sock.sendall(message("STATUS", "Slicer", struct.pack(">HQ20s", 1, 0, b"") + b"\0", 7, version=2))
+    # A PLUS-style command, answered ACK_<id>.
+    sock.sendall(command("CMD_1", '<Command Name="status" Text="" />', 8))
+    kind, device, stamp, body = read_message(sock)
+    assert (kind, device, stamp) == ("STRING", "ACK_1", 8) and b"SUCCESS" in body, body
+    lps = final_pose_lps(dataset, "A")
+    ras = (-lps[0], -lps[1], lps[2])
+    sock.sendall(transform(ras, timestamp=123456789, version=2))
+    surfaces = {}
+    while True:
+        kind, device, stamp, body = read_message(sock)
+        assert stamp == 123456789, (kind, device, stamp)  # every answer carries its input's timestamp
+        if kind == "POLYDATA":
+            header = struct.unpack(">10I", body[:40])
+            surfaces[device] = header
+            continue
+        assert (kind, device) == ("POINT", "targets")
+        served = targets_from(body)
+        break
+    npoints, _, _, _, _, npolygons, _, _, _, nattributes = surfaces["liver"]
+    assert npoints > 100 and npolygons > 100 and nattributes == 1, surfaces["liver"]
+    assert "tumours" in surfaces
+    # The command's answer for the same pose (20 updates along the path; the LCP's solution is one).
+    subject = physreg.CompressionSubject.from_dataset(dataset, grid=GRID)
+    r = physreg.predict_compression(subject, physreg.CompressionCase.from_dataset(dataset, "A"), solver="condensed")
+    assert len(served) == len(r.landmarks) == 25
+    worst = max(np.linalg.norm(np.array([-served[n][0], -served[n][1], served[n][2]]) - np.array(p)) for n, p in r.landmarks.items())
+    moved = max(np.linalg.norm(np.array(p) - np.array(subject.rest_landmarks[n])) for n, p in r.landmarks.items())
+    assert moved > 0.5 and worst < 0.01, (worst, moved)  # mm (float32 on the wire)
+
+
+def test_stale_poses_are_dropped_and_the_latest_is_answered(server, dataset):
+    sock = server
+    lps = final_pose_lps(dataset, "A")
+    burst = b"".join(transform((-lps[0], -lps[1], lps[2] + 0.1 * k), timestamp=1000 + k) for k in range(8))
+    sock.sendall(burst + command("CMD_2", '<Command Name="reset" />', 2000))
+    answered = []
+    while True:
+        kind, device, stamp, body = read_message(sock)
+        if kind == "POINT":
+            answered.append(stamp)
+        if kind == "STRING":
+            assert device == "ACK_2" and b"SUCCESS" in body
+            break
+    assert answered and answered[-1] == 1007 and len(answered) <= 8, answered
+    assert answered == sorted(answered)
+
+
+def test_a_corrupt_message_stops_the_server_with_a_clear_error(dataset, program):
+    if not program:
+        skip_or_fail("the physreg program is needed to run the server")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    p = subprocess.Popen([program, "--log-level", "warn", "serve", "--dataset", str(dataset), "--grid", GRID, "--port", str(port), "--once"],
+                         stderr=subprocess.PIPE, text=True)
+    assert "listening" in p.stderr.readline()
+    bad = bytearray(transform((0.0, 0.0, 0.0), timestamp=5))
+    bad[-1] ^= 0x55  # one flipped byte in the body: the CRC no longer matches
+    with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
+        sock.sendall(bytes(bad))
+        p.wait(timeout=60)
+    assert p.returncode == 1
+    assert "TRANSFORM message 'tool': CRC mismatch" in p.stderr.read()
+
+
+def test_impossible_options_are_refused(dataset, program):
+    if not program:
+        skip_or_fail("the physreg program is needed")
+    r = subprocess.run([program, "serve", "--dataset", str(dataset), "--port", "70000"], capture_output=True, text=True)
+    assert r.returncode == 1 and "--port 70000 must lie in 1 … 65535" in r.stderr
+    r = subprocess.run([program, "serve", "--dataset", str(dataset), "--port", "18945", "--frame", "xyz"], capture_output=True, text=True)
+    assert r.returncode == 1 and "--frame 'xyz': use ras or lps" in r.stderr
