@@ -9,6 +9,7 @@
 // (the 1.11 library cannot unpack version 2, which Slicer sends); answers use version 1, packed
 // by Debian's libopenigtlink.
 #include "cli_support.hpp"
+#include "igtl_wire.hpp"
 #include "settings_options.hpp"
 
 #include "physreg/core/error.hpp"
@@ -19,9 +20,7 @@
 
 #include <igtlPointMessage.h>
 #include <igtlPolyDataMessage.h>
-#include <igtlStatusMessage.h>
 #include <igtlStringMessage.h>
-#include <igtl_util.h>
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -39,114 +38,6 @@
 
 namespace physreg::cli {
 namespace {
-
-constexpr std::size_t header_size = 58;
-
-std::uint64_t read_be(const std::uint8_t* p, int bytes)
-{
-    std::uint64_t v = 0;
-    for (int i = 0; i < bytes; ++i) v = (v << 8) | p[i];
-    return v;
-}
-
-float read_float_be(const std::uint8_t* p)
-{
-    const auto bits = static_cast<std::uint32_t>(read_be(p, 4));
-    float f;
-    std::memcpy(&f, &bits, 4);
-    return f;
-}
-
-std::string fixed_string(const std::uint8_t* p, std::size_t n)
-{
-    std::size_t len = 0;
-    while (len < n && p[len] != 0) ++len;
-    return std::string(reinterpret_cast<const char*>(p), len);
-}
-
-struct Message {
-    int version = 1;
-    std::string type, device;
-    std::uint64_t timestamp = 0;  ///< OpenIGTLink's 32.32 fixed point seconds
-    std::vector<std::uint8_t> content; ///< the body without version 2's extended header and metadata
-};
-
-/// Closes the descriptor when it goes.
-class Descriptor {
-public:
-    explicit Descriptor(int fd = -1) : m_fd(fd) {}
-    ~Descriptor()
-    {
-        if (m_fd >= 0) ::close(m_fd);
-    }
-    Descriptor(const Descriptor&) = delete;
-    Descriptor& operator=(const Descriptor&) = delete;
-    int get() const { return m_fd; }
-
-private:
-    int m_fd;
-};
-
-bool read_exact(int fd, std::uint8_t* out, std::size_t n)
-{
-    while (n > 0) {
-        const ssize_t got = ::recv(fd, out, n, 0);
-        if (got <= 0) return false;
-        out += got;
-        n -= static_cast<std::size_t>(got);
-    }
-    return true;
-}
-
-bool send_all(int fd, const void* data, std::size_t n)
-{
-    const auto* p = static_cast<const std::uint8_t*>(data);
-    while (n > 0) {
-        const ssize_t sent = ::send(fd, p, n, MSG_NOSIGNAL);
-        if (sent <= 0) return false;
-        p += sent;
-        n -= static_cast<std::size_t>(sent);
-    }
-    return true;
-}
-
-/// One message: the 58-byte header (version 1 or 2), the body checked against its CRC-64, the
-/// content without version 2's extended header and metadata. Nothing (end of stream) when the
-/// client has gone; Error for a corrupt message.
-std::optional<Message> read_message(int fd)
-{
-    std::uint8_t h[header_size];
-    if (!read_exact(fd, h, header_size)) return std::nullopt;
-    Message m;
-    m.version = static_cast<int>(read_be(h, 2));
-    m.type = fixed_string(h + 2, 12);
-    m.device = fixed_string(h + 14, 20);
-    m.timestamp = read_be(h + 34, 8);
-    const std::uint64_t body_size = read_be(h + 42, 8), crc = read_be(h + 50, 8);
-    if (m.version < 1 || m.version > 2) fail("OpenIGTLink: header version {} (this server reads 1 and 2)", m.version);
-    if (body_size > (std::uint64_t(1) << 31)) fail("OpenIGTLink: {} message '{}' announces {} bytes", m.type, m.device, body_size);
-    std::vector<std::uint8_t> body(body_size);
-    if (body_size > 0 && !read_exact(fd, body.data(), body_size)) return std::nullopt;
-    if (crc64(body.data(), body_size, 0) != crc) fail("OpenIGTLink: {} message '{}': CRC mismatch", m.type, m.device);
-    std::size_t begin = 0, end = body.size();
-    if (m.version == 2) {
-        if (body_size < 12) fail("OpenIGTLink: version 2 {} message '{}' shorter than its extended header", m.type, m.device);
-        const std::size_t extended = read_be(body.data(), 2), meta_header = read_be(body.data() + 2, 2), meta = read_be(body.data() + 4, 4);
-        if (extended < 12 || extended + meta_header + meta > body_size)
-            fail("OpenIGTLink: version 2 {} message '{}': extended header and metadata larger than the body", m.type, m.device);
-        begin = extended;
-        end = body_size - meta_header - meta;
-    }
-    m.content.assign(body.begin() + static_cast<std::ptrdiff_t>(begin), body.begin() + static_cast<std::ptrdiff_t>(end));
-    return m;
-}
-
-/// True when more bytes wait on the socket (another message behind this one).
-bool more_waiting(int fd)
-{
-    pollfd p{fd, POLLIN, 0};
-    return ::poll(&p, 1, 0) > 0 && (p.revents & POLLIN);
-}
 
 /// The surfaces a display shows: per organ the faces of its cells that border other tissue or
 /// nothing, with their nodes.
@@ -226,7 +117,8 @@ void add_subcommand_serve(CLI::App& app)
     sub->add_option("--host", o->host, "Address to listen on (default 127.0.0.1; 0.0.0.0 for every interface)");
     sub->add_option("--frame", o->frame, "Coordinates on the wire: ras (3D Slicer's, default) or lps (the images')");
     sub->add_option("--tool", o->tool, "Device name of the tool's TRANSFORM (default 'tool'); other transforms are ignored");
-    sub->add_option("--record", o->record, "Write every message in and out (type, device, timestamp, wall time) as JSON lines");
+    sub->add_option("--record", o->record, "Write every message in and out (type, device, timestamp, wall time; the bytes of those in) as JSON "
+                                           "lines: physreg replay sends such a session again");
     sub->add_flag("--once", o->once, "Stop when the first client disconnects (tests, scripts)");
     sub->callback([o, settings] {
         if (o->port < 1 || o->port > 65535) fail("--port {} must lie in 1 … 65535", o->port);
@@ -273,10 +165,15 @@ void add_subcommand_serve(CLI::App& app)
             record.open(o->record);
             if (!record) fail("--record '{}': cannot write", o->record);
         }
-        const auto log_message = [&](const char* direction, const std::string& type, const std::string& device, std::uint64_t timestamp) {
+        // One JSON line per message; what came in with its bytes (hex), so that `physreg replay` can
+        // send the session again at its own pace.
+        const auto log_message = [&](const char* direction, const std::string& type, const std::string& device, std::uint64_t timestamp,
+                                     const std::vector<std::uint8_t>* raw = nullptr) {
             if (!record) return;
             const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-            record << nlohmann::json{{"direction", direction}, {"type", type}, {"device", device}, {"timestamp", timestamp}, {"wall_s", wall}}.dump() << "\n";
+            nlohmann::json line{{"direction", direction}, {"type", type}, {"device", device}, {"timestamp", timestamp}, {"wall_s", wall}};
+            if (raw) line["bytes_hex"] = to_hex(*raw);
+            record << line.dump() << "\n";
             record.flush();
         };
         logger()->info("serve: model {} nodes, {} candidate skin nodes, {} surface and target nodes; ready in {:.1f} s, listening on {}:{} ({} frame)",
@@ -289,23 +186,23 @@ void add_subcommand_serve(CLI::App& app)
             if (client.get() < 0) fail("serve: accept failed: {}", std::strerror(errno));
             ::setsockopt(client.get(), IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
             logger()->info("serve: a client connected");
-            std::optional<Message> pending; // read while dropping stale poses, not answered yet
+            std::optional<IgtlMessage> pending; // read while dropping stale poses, not answered yet
             while (true) {
-                auto message = pending ? std::move(pending) : read_message(client.get());
+                auto message = pending ? std::move(pending) : read_igtl_message(client.get());
                 pending.reset();
                 if (!message) break;
-                log_message("in", message->type, message->device, message->timestamp);
+                log_message("in", message->type, message->device, message->timestamp, &message->raw);
                 if (message->type == "TRANSFORM" && message->device == o->tool) {
                     // The latest pose wins: poses queued behind this one replace it unanswered.
                     int dropped = 0;
                     while (more_waiting(client.get())) {
-                        auto next = read_message(client.get());
+                        auto next = read_igtl_message(client.get());
                         if (!next) break;
                         if (next->type != "TRANSFORM" || next->device != o->tool) {
                             pending = std::move(next); // answered after this pose, in order
                             break;
                         }
-                        log_message("in", next->type, next->device, next->timestamp);
+                        log_message("in", next->type, next->device, next->timestamp, &next->raw);
                         message = std::move(next);
                         ++dropped;
                     }

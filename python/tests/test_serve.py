@@ -179,3 +179,45 @@ def test_impossible_options_are_refused(dataset, program):
     assert r.returncode == 1 and "--port 70000 must lie in 1 … 65535" in r.stderr
     r = subprocess.run([program, "serve", "--dataset", str(dataset), "--port", "18945", "--frame", "xyz"], capture_output=True, text=True)
     assert r.returncode == 1 and "--frame 'xyz': use ras or lps" in r.stderr
+
+
+def start_server(dataset, program, *extra):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    p = subprocess.Popen([program, "--log-level", "warn", "serve", "--dataset", str(dataset), "--grid", GRID, "--port", str(port), "--once", *extra],
+                         stderr=subprocess.PIPE, text=True)
+    assert "listening" in p.stderr.readline()
+    return p, port
+
+
+def test_a_session_is_recorded_and_replayed(dataset, program, tmp_path):
+    """physreg replay plays the dataset's tool path at 50 poses per second to a recording server, then
+    the recording to a fresh server at twice the pace; both end with the last pose answered."""
+    if not program:
+        skip_or_fail("the physreg program is needed")
+    record = tmp_path / "session.jsonl"
+    p, port = start_server(dataset, program, "--record", str(record))
+    r = subprocess.run([program, "replay", "--to", f"127.0.0.1:{port}", "--dataset", str(dataset), "--states", "A", "--steps", "10",
+                        "--rate", "50", "--json"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert s["poses_sent"] == 11 and 1 <= s["poses_answered"] <= 11 and s["last_pose_answered"], s
+    assert 0 < s["latency_ms"]["median"] < 1000, s["latency_ms"]
+    p.wait(timeout=60)
+    assert p.returncode == 0
+    lines = [json.loads(line) for line in record.read_text().splitlines()]
+    received = [line for line in lines if line["direction"] == "in"]
+    assert len(received) == 11 and all("bytes_hex" in line for line in received)
+    assert len([line for line in lines if line["direction"] == "out" and line["type"] == "POINT"]) == s["poses_answered"]
+    p2, port2 = start_server(dataset, program)
+    r2 = subprocess.run([program, "replay", str(record), "--to", f"127.0.0.1:{port2}", "--speed", "2", "--json"], capture_output=True, text=True,
+                        timeout=120)
+    assert r2.returncode == 0, r2.stderr
+    s2 = json.loads(r2.stdout)
+    assert s2["poses_sent"] == 11 and s2["last_pose_answered"], s2
+    p2.wait(timeout=60)
+    # A damaged recording is refused before anything is sent, naming the line.
+    record.write_text('{"direction": "in", "wall_s": 0, "bytes_hex": "zz"}\n')
+    r3 = subprocess.run([program, "replay", str(record), "--to", "127.0.0.1:1"], capture_output=True, text=True)
+    assert r3.returncode == 1 and "line 1: 'z' is not a hex digit" in r3.stderr, r3.stderr
