@@ -3,7 +3,9 @@
 // or a navigation display (3D Slicer's OpenIGTLinkIF, PLUS) connects to: each TRANSFORM named after
 // the tool moves the body model by condensed contact (the latest pose wins, stale ones are dropped),
 // and the answer goes back as POLYDATA per organ surface (fixed topology, point scalar
-// displacement_mm) and POINT for the targets, stamped with the input's timestamp. STRING CMD_<id>
+// displacement_mm) and POINT for the targets, stamped with the input's timestamp. A POLYDATA named
+// after the cloud is registered by paper 001's pipeline in the background (tool updates go on) and
+// answered by POLYDATA liver_registered and POINT targets_registered. STRING CMD_<id>
 // (PLUS's command form, XML body with Name="…") is answered ACK_<id>: status, reset. STATUS is
 // ignored, unknown types are skipped by their body size. Headers of version 1 and 2 are read here
 // (the 1.11 library cannot unpack version 2, which Slicer sends); answers use version 1, packed
@@ -17,9 +19,12 @@
 #include "physreg/io/dataset.hpp"
 #include "physreg/mesh/faces.hpp"
 #include "physreg/registration/compression/compression_registration.hpp"
+#include "physreg/registration/surface/partial_surface_registration.hpp"
+#include "physreg/registration/surface/surface_model.hpp"
 
 #include <igtlPointMessage.h>
 #include <igtlPolyDataMessage.h>
+#include <igtlStatusMessage.h>
 #include <igtlStringMessage.h>
 
 #include <arpa/inet.h>
@@ -31,6 +36,7 @@
 
 #include <chrono>
 #include <cstring>
+#include <future>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -89,6 +95,22 @@ void stamp(igtl::MessageBase* m, std::uint64_t timestamp)
     m->SetTimeStamp(static_cast<unsigned int>(timestamp >> 32), static_cast<unsigned int>(timestamp & 0xffffffffu));
 }
 
+/// The points of a POLYDATA message's content (its header: ten uint32 counts and sizes, then the
+/// points as big-endian float32 triples); `wire` −1 turns RAS into LPS. Error naming the device.
+std::vector<Vec3> polydata_points(const IgtlMessage& m, double wire)
+{
+    if (m.content.size() < 40) fail("OpenIGTLink: POLYDATA '{}' shorter than its header", m.device);
+    const std::uint64_t n = read_be(m.content.data(), 4);
+    if (40 + 12 * n > m.content.size()) fail("OpenIGTLink: POLYDATA '{}' announces {} points in {} bytes", m.device, n, m.content.size());
+    std::vector<Vec3> points(n);
+    for (std::uint64_t i = 0; i < n; ++i) {
+        const std::uint8_t* p = m.content.data() + 40 + 12 * i;
+        points[i] = Vec3(wire * read_float_be(p), wire * read_float_be(p + 4), read_float_be(p + 8));
+        if (!points[i].allFinite()) fail("OpenIGTLink: POLYDATA '{}': point {} is not finite", m.device, i);
+    }
+    return points;
+}
+
 /// The attribute value Name="…" of a PLUS command's XML body ("" when absent).
 std::string xml_attribute(const std::string& xml, const std::string& attribute)
 {
@@ -103,8 +125,9 @@ std::string xml_attribute(const std::string& xml, const std::string& attribute)
 void add_subcommand_serve(CLI::App& app)
 {
     struct Options : CommonOptions {
-        std::string dataset, parameters, host = "127.0.0.1", frame = "ras", tool = "tool", record;
+        std::string dataset, parameters, host = "127.0.0.1", frame = "ras", tool = "tool", record, cloud = "cloud";
         int port = 0;
+        double surface_cell_size = PartialSurfaceSettings{}.cell_size;
         bool once = false;
     };
     auto o = std::make_shared<Options>();
@@ -119,6 +142,9 @@ void add_subcommand_serve(CLI::App& app)
     sub->add_option("--tool", o->tool, "Device name of the tool's TRANSFORM (default 'tool'); other transforms are ignored");
     sub->add_option("--record", o->record, "Write every message in and out (type, device, timestamp, wall time; the bytes of those in) as JSON "
                                            "lines: physreg replay sends such a session again");
+    sub->add_option("--cloud", o->cloud, "Device name of the intra-operative clouds (POLYDATA points; default 'cloud'): each one is registered by "
+                                         "paper 001's pipeline in the background while tool updates go on, the latest cloud winning");
+    sub->add_option("--surface-cell-size", o->surface_cell_size, "Paper 001's tetrahedral liver model for clouds: largest circumradius, mm (default 7)");
     sub->add_flag("--once", o->once, "Stop when the first client disconnects (tests, scripts)");
     sub->callback([o, settings] {
         if (o->port < 1 || o->port > 65535) fail("--port {} must lie in 1 … 65535", o->port);
@@ -181,6 +207,35 @@ void add_subcommand_serve(CLI::App& app)
                        o->port, o->frame);
         std::cerr << fmt::format("serve: listening on {}:{}\n", o->host, o->port) << std::flush;
         int updates = 0;
+        // Clouds (paper 001) run in the background on a tetrahedral liver model meshed at the first
+        // cloud; the latest cloud waiting replaces older ones.
+        PartialSurfaceSettings surface_settings;
+        surface_settings.cell_size = o->surface_cell_size;
+        validate(surface_settings, SettingNaming::option);
+        std::optional<SurfaceModel> surface_model;
+        std::future<PartialSurfaceResult> running;
+        std::uint64_t running_stamp = 0;
+        std::optional<std::pair<LabelledPointCloud, std::uint64_t>> waiting_cloud;
+        const auto start_cloud = [&](LabelledPointCloud cloud, std::uint64_t timestamp) {
+            running_stamp = timestamp;
+            running = std::async(std::launch::async, [&, cloud = std::move(cloud)]() {
+                if (!surface_model) {
+                    std::set<std::int32_t> liver(subject.roles.liver.begin(), subject.roles.liver.end());
+                    liver.insert(subject.roles.lesion.begin(), subject.roles.lesion.end());
+                    liver.insert(subject.roles.vessel.begin(), subject.roles.vessel.end());
+                    // No notch region: the wire's clouds are unlabelled, and every triangle is "surface" to them.
+                    surface_model = surface_model_from_labels(subject.labels, liver, surface_settings.cell_size, std::nullopt,
+                                                              static_cast<unsigned>(surface_settings.seed), "serve: the liver model for clouds");
+                }
+                PartialSurfaceCase c;
+                c.mesh = surface_model->mesh;
+                c.surface = surface_model->surface;
+                c.quality = surface_model->quality;
+                c.cloud = cloud;
+                c.landmarks = subject.rest_landmarks;
+                return register_partial_surface(c, surface_settings);
+            });
+        };
         do {
             Descriptor client(::accept(listener.get(), nullptr, nullptr));
             if (client.get() < 0) fail("serve: accept failed: {}", std::strerror(errno));
@@ -188,6 +243,65 @@ void add_subcommand_serve(CLI::App& app)
             logger()->info("serve: a client connected");
             std::optional<IgtlMessage> pending; // read while dropping stale poses, not answered yet
             while (true) {
+                if (running.valid() && running.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
+                    // A cloud's registration is done: its surface and targets go out with the cloud's timestamp.
+                    try {
+                        const PartialSurfaceResult r = running.get();
+                        const auto& u = r.chosen_method().displacement_mm;
+                        auto points = igtl::PolyDataPointArray::New();
+                        auto polygons = igtl::PolyDataCellArray::New();
+                        std::map<std::int32_t, std::uint32_t> index;
+                        for (const auto& t : surface_model->surface.triangles) {
+                            igtlUint32 cell[3];
+                            for (int k = 0; k < 3; ++k) {
+                                const std::int32_t n = t[k];
+                                const auto [it, added] = index.emplace(n, static_cast<std::uint32_t>(index.size()));
+                                if (added) {
+                                    const Vec3 x = surface_model->mesh.nodes[n] + Vec3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
+                                    points->AddPoint(static_cast<igtlFloat32>(wire * x[0]), static_cast<igtlFloat32>(wire * x[1]), static_cast<igtlFloat32>(x[2]));
+                                }
+                                cell[k] = it->second;
+                            }
+                            polygons->AddCell(3, cell);
+                        }
+                        auto surface_message = igtl::PolyDataMessage::New();
+                        surface_message->SetDeviceName("liver_registered");
+                        surface_message->SetPoints(points);
+                        surface_message->SetPolygons(polygons);
+                        stamp(surface_message, running_stamp);
+                        send_message(client.get(), surface_message);
+                        log_message("out", "POLYDATA", "liver_registered", running_stamp);
+                        auto targets_message = igtl::PointMessage::New();
+                        targets_message->SetDeviceName("targets_registered");
+                        for (const auto& l : *r.landmarks) {
+                            auto e = igtl::PointElement::New();
+                            e->SetName(l.name.c_str());
+                            e->SetPosition(static_cast<igtlFloat32>(wire * l.position[0]), static_cast<igtlFloat32>(wire * l.position[1]),
+                                           static_cast<igtlFloat32>(l.position[2]));
+                            targets_message->AddPointElement(e);
+                        }
+                        stamp(targets_message, running_stamp);
+                        send_message(client.get(), targets_message);
+                        log_message("out", "POINT", "targets_registered", running_stamp);
+                        logger()->info("serve: cloud registered ({}; {})", r.chosen_method().name, r.safeguard.statement);
+                    } catch (const Error& e) {
+                        // A cloud the pipeline refuses is the client's bad input: said on the wire, the session goes on.
+                        auto status = igtl::StatusMessage::New();
+                        status->SetDeviceName(o->cloud.c_str());
+                        status->SetCode(igtl::StatusMessage::STATUS_CONFIG_ERROR);
+                        status->SetErrorName("registration");
+                        status->SetStatusString(e.what());
+                        stamp(status, running_stamp);
+                        send_message(client.get(), status);
+                        log_message("out", "STATUS", o->cloud, running_stamp);
+                        logger()->warn("serve: cloud refused: {}", e.what());
+                    }
+                    if (waiting_cloud) {
+                        start_cloud(std::move(waiting_cloud->first), waiting_cloud->second);
+                        waiting_cloud.reset();
+                    }
+                }
+                if (!pending && !more_waiting(client.get(), running.valid() ? 50 : -1)) continue;
                 auto message = pending ? std::move(pending) : read_igtl_message(client.get());
                 pending.reset();
                 if (!message) break;
@@ -273,9 +387,18 @@ void add_subcommand_serve(CLI::App& app)
                     stamp(ack, message->timestamp);
                     send_message(client.get(), ack);
                     log_message("out", "STRING", "ACK_" + message->device.substr(4), message->timestamp);
+                } else if (message->type == "POLYDATA" && message->device == o->cloud) {
+                    LabelledPointCloud cloud;
+                    cloud.points = polydata_points(*message, wire);
+                    cloud.labels.assign(cloud.points.size(), 0);
+                    if (running.valid()) waiting_cloud.emplace(std::move(cloud), message->timestamp); // the latest waiting cloud wins
+                    else start_cloud(std::move(cloud), message->timestamp);
                 }
                 // STATUS (Slicer sends one on connecting), other devices and unknown types: skipped.
             }
+            if (running.valid()) running.wait(); // a registration still running finishes before the next client
+            running = {};
+            waiting_cloud.reset();
             logger()->info("serve: the client disconnected after {} updates", updates);
         } while (!o->once);
     });
