@@ -80,17 +80,21 @@ def targets_from(body):
     return out
 
 
+def start_server(dataset, program, *extra):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    p = subprocess.Popen([program, "--log-level", "warn", "serve", "--dataset", str(dataset), "--grid", GRID, "--port", str(port), "--once", *extra],
+                         stderr=subprocess.PIPE, text=True)
+    assert "listening" in p.stderr.readline()
+    return p, port
+
+
 @pytest.fixture(scope="module")
 def server(dataset, program):
     if not program:
         skip_or_fail("the physreg program is needed to run the server")
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    p = subprocess.Popen([program, "--log-level", "warn", "serve", "--dataset", str(dataset), "--grid", GRID, "--port", str(port), "--once"],
-                         stderr=subprocess.PIPE, text=True)
-    line = p.stderr.readline()
-    assert "listening" in line, line
+    p, port = start_server(dataset, program)
     sock = socket.create_connection(("127.0.0.1", port), timeout=60)
     yield sock
     sock.close()
@@ -157,12 +161,7 @@ def test_stale_poses_are_dropped_and_the_latest_is_answered(server, dataset):
 def test_a_corrupt_message_stops_the_server_with_a_clear_error(dataset, program):
     if not program:
         skip_or_fail("the physreg program is needed to run the server")
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    p = subprocess.Popen([program, "--log-level", "warn", "serve", "--dataset", str(dataset), "--grid", GRID, "--port", str(port), "--once"],
-                         stderr=subprocess.PIPE, text=True)
-    assert "listening" in p.stderr.readline()
+    p, port = start_server(dataset, program)
     bad = bytearray(transform((0.0, 0.0, 0.0), timestamp=5))
     bad[-1] ^= 0x55  # one flipped byte in the body: the CRC no longer matches
     with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
@@ -179,16 +178,6 @@ def test_impossible_options_are_refused(dataset, program):
     assert r.returncode == 1 and "--port 70000 must lie in 1 … 65535" in r.stderr
     r = subprocess.run([program, "serve", "--dataset", str(dataset), "--port", "18945", "--frame", "xyz"], capture_output=True, text=True)
     assert r.returncode == 1 and "--frame 'xyz': use ras or lps" in r.stderr
-
-
-def start_server(dataset, program, *extra):
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    p = subprocess.Popen([program, "--log-level", "warn", "serve", "--dataset", str(dataset), "--grid", GRID, "--port", str(port), "--once", *extra],
-                         stderr=subprocess.PIPE, text=True)
-    assert "listening" in p.stderr.readline()
-    return p, port
 
 
 def test_a_session_is_recorded_and_replayed(dataset, program, tmp_path):
