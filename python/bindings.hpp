@@ -6,6 +6,7 @@
 #include "physreg/core/landmark.hpp"
 #include "physreg/core/settings_spec.hpp"
 #include "physreg/core/types.hpp"
+#include "physreg/mesh/volume_mesh.hpp"
 #include "physreg/image/image_geometry.hpp"
 #include "physreg/io/point_cloud.hpp"
 
@@ -66,7 +67,15 @@ Settings settings_from(const SettingsSpec<Settings>& spec, const std::optional<p
     return s;
 }
 
+/// A label array meshed as Model.from_labels and mesh_from_labels do: kind "hex" (a grid, or one cell
+/// per voxel) or "tet" (CGAL); `ignore`: labels taken as background; `tissues`: {label: (E Pa, ν)}.
+VolumeMesh mesh_labels(const py::array& labels, const ImageGeometry& geometry, const std::string& kind, std::optional<std::array<int, 3>> grid,
+                       double cell_size_mm, double facet_distance_mm, std::optional<std::vector<std::int32_t>> only, unsigned seed,
+                       const std::vector<std::int32_t>& ignore = {}, const std::optional<std::map<std::int32_t, std::pair<double, double>>>& tissues = std::nullopt);
+
 /// The bound areas beside module.cpp's.
+void bind_io(py::module_& m);          ///< bind_io.cpp: images, meshes, surfaces, landmarks, TRE
+void bind_models(py::module_& m);      ///< bind_models.cpp: SurfaceModel, Model, observations, register
 void bind_pipelines(py::module_& m);   ///< bind_pipelines.cpp: papers 001 and 002 as the commands run them
 void bind_compression(py::module_& m); ///< bind_compression.cpp: paper 000 as the commands run it
 
