@@ -166,17 +166,20 @@ def test_a_single_tracked_pose_a_tool_speed_and_targets_in_hexahedra(dataset):
     assert np.allclose(moved[0], nodes[node] + two.displacement[node], atol=1e-9)
 
 
-def test_a_tool_that_goes_through_the_skin_is_an_error_not_a_result(dataset):
-    """Issue 46: a small sphere pushed deeper than its radius slides the skin's nodes round it and
-    ends inside the tissue; that is no prediction. Measured: a 5 mm sphere 10 mm into the coarse
-    liver left it at rest (largest displacement 0.00 mm) before this check."""
+def test_a_tool_twice_its_radius_deep_presses_the_skin(dataset):
+    """Issue 46 item 1: a small sphere pushed deeper than its radius used to slide the skin's nodes
+    round it and end inside the tissue (a 5 mm sphere 10 mm into the coarse liver left it at rest,
+    largest displacement 0.00 mm; later that was refused as an error). Contact now samples the
+    faces between the nodes too: the liver's 15 mm faces carry the tool, and the skin under it
+    moves with it, less what a face may sag and the penalty lets it sink (≤ 1.5 mm)."""
     labels, geometry = physreg.read_labels(dataset / "rest" / "labels.nii.gz")
     liver = np.isin(labels, [2, 3, 4]).astype(np.uint16)
     model = physreg.Model.from_labels(liver, geometry, kind="hex", grid=(12, 9, 6), tissues={1: (3500.0, 0.45)})
     model.hold(model.surface_nodes_facing((0.0, 1.0, 0.0)))
     front = model.mesh.nodes[np.argmin(model.mesh.nodes[:, 1])]
     start = front - np.array([0.0, 5.0, 0.0])
-    pressing = physreg.register(model, physreg.Tool(np.array([start, start + [0.0, 5.0, 0.0]]), radius_mm=5.0))
-    assert np.linalg.norm(pressing.displacement, axis=1).max() > 1.0
-    with pytest.raises(physreg.Error, match="the tool went through the model's surface instead of pressing it"):
-        physreg.register(model, physreg.Tool(np.array([start, start + [0.0, 10.0, 0.0]]), radius_mm=5.0))
+    deep = physreg.register(model, physreg.Tool(np.array([start, start + [0.0, 10.0, 0.0]]), radius_mm=5.0))
+    assert np.linalg.norm(deep.displacement, axis=1).max() > 8.5
+    # Every node stays outside the sphere at its final position (within 0.05 mm).
+    end = start + [0.0, 10.0, 0.0]
+    assert np.linalg.norm(model.mesh.nodes + deep.displacement - end, axis=1).min() > 5.0 - 0.05

@@ -141,6 +141,42 @@ void Indenter::validate() const
         fail("{}: half_extents_mm must be positive", who);
 }
 
+double face_span_mm(const std::array<Vec3, 4>& x, int count)
+{
+    return count == 4 ? std::max((x[0] - x[2]).norm(), (x[1] - x[3]).norm())
+                      : std::max({(x[0] - x[1]).norm(), (x[1] - x[2]).norm(), (x[2] - x[0]).norm()});
+}
+
+FaceContactSamples face_contact_samples(const Indenter& tool, const std::array<Vec3, 4>& corners, int count)
+{
+    FaceContactSamples out;
+    if (tool.shape == IndenterShape::plane) return out;
+    const double radius = tool.shape == IndenterShape::box ? tool.half_extents_mm.minCoeff() : tool.radius_mm;
+    const double span = face_span_mm(corners, count), half = 0.5 * span;
+    const double sag = half < radius ? radius - std::sqrt(radius * radius - half * half) : radius;
+    out.allowance_mm = std::min(sag, 0.2 * radius);
+    const int n = std::clamp(static_cast<int>(std::ceil(span / (0.25 * radius))), 2, 8);
+    if (count == 4) {
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < n; ++j) {
+                const double xi = (i + 0.5) / n, eta = (j + 0.5) / n;
+                out.weights.push_back({(1 - xi) * (1 - eta), xi * (1 - eta), xi * eta, (1 - xi) * eta});
+            }
+    } else {
+        // Centroids of the n² sub-triangles: n(n+1)/2 upright, n(n−1)/2 inverted.
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; i + j < n; ++j) {
+                const double b1 = (i + 1.0 / 3.0) / n, b2 = (j + 1.0 / 3.0) / n;
+                out.weights.push_back({1 - b1 - b2, b1, b2, 0.0});
+                if (i + j < n - 1) {
+                    const double c1 = (i + 2.0 / 3.0) / n, c2 = (j + 2.0 / 3.0) / n;
+                    out.weights.push_back({1 - c1 - c2, c1, c2, 0.0});
+                }
+            }
+    }
+    return out;
+}
+
 void Loads::validate(std::size_t node_count) const
 {
     for (const auto& c : constraints) {

@@ -47,6 +47,22 @@ struct Indenter {
     void validate() const;
 };
 
+/// Where a tool may press a surface face between its nodes. Node-to-surface contact holds a
+/// surface's nodes outside a tool, not the faces between them: pressed deeper than about its
+/// radius, a sphere stretches the skin until the nodes slide round it and it slips between them.
+/// So contact also samples each face near a tool (a grid on its current shape, about a quarter of
+/// the tool's radius apart); a sample may sink into the tool by the sag of a chord across the face
+/// (what a face whose nodes all lie on a sphere shows), at most a fifth of the radius, and no more.
+struct FaceContactSamples {
+    std::vector<std::array<double, 4>> weights; ///< per sample: the corners' shape functions (Σ = 1)
+    double allowance_mm = 0.0;                  ///< how far a sample may lie inside the tool
+};
+/// The samples of a face with `count` (3 or 4, cyclic order) corners at `corners` (mm) against
+/// `tool`; none for a plane (a face between nodes outside a half-space is outside it).
+FaceContactSamples face_contact_samples(const Indenter& tool, const std::array<Vec3, 4>& corners, int count);
+/// The face's size: its longer diagonal (quad) or longest edge (triangle), mm.
+double face_span_mm(const std::array<Vec3, 4>& corners, int count);
+
 struct Loads {
     std::vector<NodeConstraint> constraints;
     std::vector<Indenter> indenters;

@@ -283,8 +283,10 @@ TledModel::TledModel(const VolumeMesh& mesh, const TissueTable& tissues, const T
     }
     build_work_partition(mesh);
     for (const auto& face : match_faces(mesh))
-        if (face.neighbour < 0)
+        if (face.neighbour < 0) {
+            m_surface_faces.push_back(face.nodes);
             for (int v = 0; v < face.node_count(); ++v) m_surface_nodes.push_back(face.nodes[v]);
+        }
     std::sort(m_surface_nodes.begin(), m_surface_nodes.end());
     m_surface_nodes.erase(std::unique(m_surface_nodes.begin(), m_surface_nodes.end()), m_surface_nodes.end());
 }

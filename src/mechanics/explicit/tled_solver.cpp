@@ -338,13 +338,19 @@ template <typename Real>
 void TledSolver<Real>::select_contact_candidates(const Real* u, double from_factor, double to_factor)
 {
     const auto& surface = m_model.surface_nodes();
+    const auto& faces = m_model.surface_faces();
     m_contact_candidates.assign(m_loads.indenters.size(), {});
+    m_contact_faces.assign(m_loads.indenters.size(), {});
     double margin = std::numeric_limits<double>::infinity();
+    std::vector<double> distance(m_n, std::numeric_limits<double>::infinity());
     for (std::size_t t = 0; t < m_loads.indenters.size(); ++t) {
         const Indenter& tool = m_loads.indenters[t];
+        const bool faces_too = tool.shape != IndenterShape::plane; // a face between nodes outside a half-space is outside it
         const double reach = tool.reach_mm();
         if (!std::isfinite(reach)) {
             m_contact_candidates[t] = surface;
+            if (faces_too)
+                for (std::size_t f = 0; f < faces.size(); ++f) m_contact_faces[t].push_back(static_cast<std::int32_t>(f));
             continue;
         }
         const double tool_margin = std::max(1.0, 0.25 * reach);
@@ -361,17 +367,79 @@ void TledSolver<Real>::select_contact_candidates(const Real* u, double from_fact
         const double limit = reach + tool_margin;
         for (auto node : surface) {
             const Vec3 x = current_position(u, node);
-            double distance = std::numeric_limits<double>::infinity();
+            double d = std::numeric_limits<double>::infinity();
             for (std::size_t i = 0; i + 1 < polyline.size(); ++i) {
                 const Vec3 a = polyline[i], ab = polyline[i + 1] - a;
                 const double length2 = ab.squaredNorm();
                 const double along = length2 > 0 ? std::clamp((x - a).dot(ab) / length2, 0.0, 1.0) : 0.0;
-                distance = std::min(distance, (x - a - along * ab).norm());
+                d = std::min(d, (x - a - along * ab).norm());
             }
-            if (distance <= limit) m_contact_candidates[t].push_back(node);
+            distance[static_cast<std::size_t>(node)] = d;
+            if (d <= limit) m_contact_candidates[t].push_back(node);
+        }
+        // A face is reached through its interior before its nodes: a face whose nearest node is
+        // within the limit plus the face's size.
+        if (!faces_too) continue;
+        for (std::size_t f = 0; f < faces.size(); ++f) {
+            const int count = faces[f][3] < 0 ? 3 : 4;
+            std::array<Vec3, 4> x;
+            double nearest = std::numeric_limits<double>::infinity();
+            for (int a = 0; a < count; ++a) {
+                x[a] = current_position(u, faces[f][a]);
+                nearest = std::min(nearest, distance[static_cast<std::size_t>(faces[f][a])]);
+            }
+            if (nearest <= limit + face_span_mm(x, count)) m_contact_faces[t].push_back(static_cast<std::int32_t>(f));
         }
     }
     m_candidate_slack = margin;
+}
+
+// Face contact (see FaceContactSamples): a face sample inside a tool deeper than its allowance is
+// pushed out by a penalty force spread over its face's nodes by their shape functions. The
+// penalty's row sum stays within a fraction of each node's stiffness bound, so that relaxation's
+// pseudo-masses stay stable. (Tried and dropped: moving the nodes onto the tool as node contact
+// does — samples of one face undo each other and the relaxation chatters; an augmented Lagrangian
+// multiplier — it held the face exactly but kept a coarse block from converging.)
+template <typename Real>
+void TledSolver<Real>::subtract_face_contact_forces(const Real* u, double load_factor, Real* f)
+{
+    m_pressed_face_samples = 0;
+    if (!m_face_contact) return;
+    const auto& faces = m_model.surface_faces();
+    const auto& bound = m_stiffness_bound;
+    for (std::size_t t = 0; t < m_contact_faces.size(); ++t) {
+        const Indenter& tool = m_loads.indenters[t];
+        const double reach = tool.reach_mm();
+        const Vec3 centre = tool.position(load_factor);
+        for (const auto index : m_contact_faces[t]) {
+            const auto& face = faces[static_cast<std::size_t>(index)];
+            const int count = face[3] < 0 ? 3 : 4;
+            std::array<Vec3, 4> x;
+            Vec3 mid = Vec3::Zero();
+            for (int a = 0; a < count; ++a) {
+                x[a] = current_position(u, face[a]);
+                mid += x[a] / double(count);
+            }
+            if (std::isfinite(reach) && (mid - centre).norm() > reach + face_span_mm(x, count)) continue;
+            const FaceContactSamples samples = face_contact_samples(tool, x, count);
+            if (samples.weights.empty()) continue;
+            double penalty = std::numeric_limits<double>::infinity();
+            for (int a = 0; a < count; ++a) penalty = std::min(penalty, bound[static_cast<std::size_t>(face[a])]);
+            penalty *= m_face_penalty_scale * double(count) / double(samples.weights.size());
+            for (const auto& w : samples.weights) {
+                Vec3 p = Vec3::Zero();
+                for (int a = 0; a < count; ++a) p += w[a] * x[a];
+                Vec3 surface, normal;
+                if (!tool.push_out(p, load_factor, surface, normal)) continue;
+                const double excess = (surface - p).norm() - samples.allowance_mm;
+                if (excess <= 0) continue;
+                ++m_pressed_face_samples;
+                const Vec3 force = penalty * excess * normal;
+                for (int a = 0; a < count; ++a)
+                    for (int d = 0; d < 3; ++d) f[3 * static_cast<std::size_t>(face[a]) + d] -= static_cast<Real>(w[a] * force[d]);
+            }
+        }
+    }
 }
 
 template <typename Real>
@@ -568,7 +636,10 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
     for (auto node : m_contact_normal_node) m_active_tool[node] = 0;
     if (m_loads.indenters.size() != 1) std::fill(m_active_tool.begin(), m_active_tool.end(), -1);
     m_u_prev = m_u; // start at rest
+    m_face_contact = options.face_contact;
+    m_face_penalty_scale = 0.2 * options.mass_safety;
     compute_internal_forces(m_u.data(), m_force.data());
+    subtract_face_contact_forces(m_u.data(), factor_at(0), m_force.data());
     check_state(m_u.data(), "equilibrium");
     double damping = 0.0; // c; estimated after the first iteration
     SolveSummary summary;
@@ -601,6 +672,7 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
         refresh_contact();
         std::swap(m_force_prev, m_force);
         compute_internal_forces(un, m_force.data());
+        subtract_face_contact_forces(un, factor, m_force.data());
         ++m_steps;
         if (m_inverted_element >= 0) check_state(un, "equilibrium"); // throws, naming the element
         // Adaptive damping: the Rayleigh quotient of the increment, ω² ≈ Δuᵀ ΔF / Δuᵀ M Δu. Fast modes

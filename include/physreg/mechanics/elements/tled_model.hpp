@@ -84,6 +84,9 @@ public:
     const std::vector<double>& nodal_volume() const { return m_nodal_volume; }
     /// Nodes on the mesh boundary (candidates for contact).
     const std::vector<std::int32_t>& surface_nodes() const { return m_surface_nodes; }
+    /// Boundary faces (quads, or triangles with nodes[3] = -1), in cyclic node order: contact
+    /// samples their interiors, so that a tool cannot pass between surface nodes.
+    const std::vector<std::array<std::int32_t, 4>>& surface_faces() const { return m_surface_faces; }
 
     /// Critical time step (s) of central differences: min over elements of L_e / c_e.
     double critical_time_step_s() const { return m_critical_dt; }
@@ -109,6 +112,7 @@ private:
     std::vector<std::int32_t> m_element_order;
     void build_work_partition(const VolumeMesh& mesh);
     std::vector<std::int32_t> m_surface_nodes;
+    std::vector<std::array<std::int32_t, 4>> m_surface_faces;
     double m_critical_dt = 0.0, m_diagonal = 0.0;
     std::int32_t m_critical_element = -1;
 };

@@ -32,6 +32,9 @@ struct EquilibriumOptions {
     double mass_safety = 2.0;
     /// Iterations over which constraints and tools move from the previous load level to the new.
     long ramp_iterations = 200;
+    /// Tools press the surface's faces too, not only its nodes (FaceContactSamples): without it a
+    /// sphere pressed deeper than about its radius can slip between the skin's nodes.
+    bool face_contact = true;
     void validate() const;
 };
 
@@ -97,6 +100,9 @@ public:
     long steps() const { return m_steps; }
     /// Nodes currently pushed out by an indenter.
     std::size_t contact_nodes() const { return m_contact_count; }
+    /// Dynamic relaxation: surface-face samples that pressed into a tool at the last iteration
+    /// (beyond a chord's sag) and were pushed back by the face contact's penalty.
+    std::size_t pressed_face_samples() const { return m_pressed_face_samples; }
 
 private:
     void compute_internal_forces(const Real* u, Real* f);
@@ -105,6 +111,7 @@ private:
     void constrain(Real* u, double load_factor, bool record_contacts);
     void constrain_with_active_set(Real* u, double load_factor, const Real* forces, Real s);
     void select_contact_candidates(const Real* u, double from_factor, double to_factor);
+    void subtract_face_contact_forces(const Real* u, double load_factor, Real* f);
     Vec3 current_position(const Real* u, std::int32_t node) const; ///< rest + u, mm
     void check_state(const Real* u, const char* phase) const;
     std::vector<double> block_sums(const std::function<void(std::size_t, std::size_t, double*)>& partial, int values) const;
@@ -134,6 +141,11 @@ private:
     /// m_candidate_slack mm more (checking only them is the same as checking every surface node).
     std::vector<std::vector<std::int32_t>> m_contact_candidates;
     double m_candidate_slack = -1.0;
+    /// Per tool: the surface faces (indices of TledModel::surface_faces) with a candidate node.
+    std::vector<std::vector<std::int32_t>> m_contact_faces;
+    bool m_face_contact = true;
+    double m_face_penalty_scale = 0.0; ///< per face: this × the smallest stiffness bound of its nodes, N/mm
+    std::size_t m_pressed_face_samples = 0;
     double m_time = 0.0;
     double m_load_factor = 0.0; ///< load level of the last equilibrium (warm start)
     long m_steps = 0;
