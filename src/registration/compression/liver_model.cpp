@@ -474,8 +474,9 @@ void require_no_tool_passage(const VolumeMesh& mesh, const std::vector<double>& 
     const double depth = tool.path.size() > 1 ? (tool.path.back() - tool.path.front()).norm() : 0.0;
     fail("{}: the tool went through the model's surface instead of pressing it: {} of {} points of the {} mm sphere at its final position lie "
          "inside the deformed tissue (e.g. ({:.1f}, {:.1f}, {:.1f}) mm; the tool travelled {:.1f} mm from first contact, {:.2f}× its radius). The "
-         "skin's nodes slid round the tool (node-to-surface contact holds the nodes, not the faces between them), so this is no prediction: use "
-         "smaller cells under the tool or a shallower pose",
+         "skin slid round the tool: its cells are too coarse for this depth (face contact holds up to about 1.5× the radius with cells under "
+         "half the radius), or the condensed solver's linear kinematics cannot follow it. This is no prediction: use smaller cells under the "
+         "tool, the relaxation solver or a shallower pose",
          what, p.samples_inside, p.samples, tool.radius_mm, p.first_inside.x(), p.first_inside.y(), p.first_inside.z(), depth,
          tool.radius_mm > 0 ? depth / tool.radius_mm : 0.0);
 }
