@@ -395,9 +395,11 @@ void TledSolver<Real>::select_contact_candidates(const Real* u, double from_fact
 }
 
 // Face contact (see FaceContactSamples): a face sample inside a tool deeper than its allowance is
-// pushed out by a penalty force spread over its face's nodes by their shape functions. The
-// penalty's row sum stays within a fraction of each node's stiffness bound, so that relaxation's
-// pseudo-masses stay stable. (Tried and dropped: moving the nodes onto the tool as node contact
+// pushed out by a penalty force spread over its face's nodes by their shape functions: per face
+// 0.4 × the smallest Gershgorin stiffness bound of its nodes (at the default mass safety of 2).
+// Relaxation's pseudo-masses leave room for 2 × the bound; four faces pressed in full could take a
+// node past it, but only part of a face's samples press and the bound overestimates the stiffness.
+// An instability would show as an inverted element or a divergence, both errors. (Tried and dropped: moving the nodes onto the tool as node contact
 // does — samples of one face undo each other and the relaxation chatters; an augmented Lagrangian
 // multiplier — it held the face exactly but kept a coarse block from converging.)
 template <typename Real>
