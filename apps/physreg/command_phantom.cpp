@@ -30,6 +30,7 @@ void add_subcommand_phantom(CLI::App& app)
 {
     struct Options : CommonOptions {
         std::string preset = "cirs057a", from_labels, label_roles, vessel_mask, output, grid, materials = "paper000";
+        std::string organ_support = "posterior";
         std::string depths, tool = "sphere", tool_direction = "0,1,0", tool_axis = "1,0,0", tool_half_extents;
         std::vector<std::string> compressions;
         std::optional<double> resolution, tool_radius, insufflation_pa, landmark_noise, surface_noise;
@@ -59,6 +60,9 @@ void add_subcommand_phantom(CLI::App& app)
     sub->add_option("--load-step", o->load_step, "Largest tool travel per Newton load step of the ground truth, mm (default 5; small: 4)");
     sub->add_flag("--organs-only", o->organs_only, "Simulate the organs alone, posterior faces fixed, the tool pressing them directly "
                                                    "(no gel: for studies of the liver models' own mechanics)");
+    sub->add_option("--organ-support", o->organ_support,
+                    "Where the organs alone are held (insufflation, push, --organs-only): surface faces facing posterior (default), anterior, "
+                    "superior, inferior, left, right or x,y,z (LPS; outward normal · direction > 0.5)");
     sub->add_flag("--no-calculix", o->no_calculix, "Skip the CalculiX validation of the ground truth (the manifest says so)");
     sub->add_option("--compression", o->compressions, "NAME:X:Z:DEPTH (mm, LPS) instead of the default five; repeatable");
     sub->add_option("--tool", o->tool, "Indenter shape: sphere (default), cylinder (a rod pressed sideways) or box");
@@ -102,6 +106,7 @@ void add_subcommand_phantom(CLI::App& app)
         if (o->load_step) spec.load_step_mm = *o->load_step;
         spec.calculix_validation = !o->no_calculix;
         spec.simulate_body = !o->organs_only;
+        spec.organ_support = parse_organ_support(o->organ_support, "--organ-support");
         spec.materials = parse_material_set(o->materials);
         if (!o->depths.empty()) spec.depths_mm = parse_number_list(o->depths, "--depths");
         spec.tool.shape = parse_indenter_shape(o->tool);

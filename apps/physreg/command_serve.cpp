@@ -232,6 +232,7 @@ void add_subcommand_serve(CLI::App& app)
                 c.surface = surface_model->surface;
                 c.quality = surface_model->quality;
                 c.cloud = cloud;
+                c.patient_frame = true; // meshed from the subject's label volume
                 c.landmarks = subject.rest_landmarks;
                 return register_partial_surface(c, surface_settings);
             });

@@ -320,6 +320,25 @@ def safeguard_section(summary):
         out += (f"<p>Supports: {len(supports.get('nodes', []))} nodes, {esc(supports.get('kind', '?'))}"
                 + (f" ({supports.get('stiffness_n_per_mm')} N/mm)" if supports.get("kind") == "elastic" else "")
                 + "; from " + esc(", ".join(str(s.get("source")) for s in supports.get("sources", [])) or "none") + ".</p>")
+    decision = summary.get("support_hypotheses")
+    if isinstance(decision, dict) and decision.get("hypotheses"):
+        # Issue 46 item 3: each way of holding the organ that was tried, and why the winner won.
+        out += f"<p>{esc(decision.get('statement', ''))}. Rule: {esc(decision.get('rule', ''))}.</p>"
+        head = ("<tr><th>supports</th><th>nodes</th><th>kind</th><th>cloud → model mean</th><th>strain energy</th>"
+                "<th>apart from the answer</th><th>completed</th><th>chosen</th></tr>")
+        rows = []
+        for h in decision["hypotheses"]:
+            fit = (h.get("cloud_to_model_mm") or {}).get("mean")
+            apart = h.get("apart_from_chosen_mm")
+            cells = [esc(h.get("name", "?")), str(h.get("nodes", "–")), esc(h.get("kind", "?")),
+                     "–" if fit is None else f"{fit:.2f} mm", "–" if h.get("strain_energy_mj") is None else f"{h['strain_energy_mj']:.3g} mJ",
+                     "–" if apart is None else f"{apart:.1f} mm", "yes" if h.get("completed") else esc(str(h.get("stopped"))),
+                     "<b>yes</b>" if h.get("chosen") else ""]
+            rows.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+        out += f"<table>{head}{''.join(rows)}</table>"
+    notes = summary.get("notes")
+    if isinstance(notes, list) and notes:
+        out += "<p style='color:#a00'><b>Notes</b></p><ul>" + "".join(f"<li>{esc(str(n))}</li>" for n in notes) + "</ul>"
     return out
 
 

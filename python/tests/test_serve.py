@@ -255,7 +255,7 @@ def test_a_cloud_is_registered_in_the_background_while_the_tool_is_followed(data
     labels, geometry = physreg.read_labels(dataset / "rest" / "labels.nii.gz")
     model = physreg.SurfaceModel.from_labels(labels, geometry, liver_labels=[2, 3, 4], cell_size_mm=7.0)
     names, rest, _ = physreg.read_landmarks(dataset / "rest" / "landmarks.csv")
-    case = physreg.PartialSurfaceCase(model, points, landmarks={n: tuple(x) for n, x in zip(names, rest)})
+    case = physreg.PartialSurfaceCase(model, points, landmarks={n: tuple(x) for n, x in zip(names, rest)}, patient_frame=True)
     r = physreg.register_partial_surface(case)
     assert len(served) == len(r.landmarks) == 25
     worst = max(np.linalg.norm(np.array([-served[n][0], -served[n][1], served[n][2]]) - np.array(x)) for n, x in r.landmarks.items())

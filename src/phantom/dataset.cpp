@@ -218,8 +218,8 @@ GroundTruth build_ground_truth(const Prepared& p, const PhantomSpec& spec)
     LabelRoles roles = p.roles;
     if (!spec.simulate_body) roles.body.clear(), roles.bone.clear(); // the gel stays at rest, nothing holds it
     gt.tissues = draw_ground_truth_tissues(spec.materials, roles, present, mix_seed(spec.seed, "materials"), gt.material_ranges);
-    gt.body = build_body_model(p.labels, roles, gt.tissues, spec.ground_truth_mesh, static_cast<unsigned>(spec.seed));
-    if (gt.body.name == "body") gt.organs = build_organ_model(gt.body, p.roles, gt.tissues);
+    gt.body = build_body_model(p.labels, roles, gt.tissues, spec.ground_truth_mesh, static_cast<unsigned>(spec.seed), spec.organ_support);
+    if (gt.body.name == "body") gt.organs = build_organ_model(gt.body, p.roles, gt.tissues, spec.organ_support);
     return gt;
 }
 

@@ -12,7 +12,9 @@
 #include <chrono>
 #include <cmath>
 #include <functional>
+#include <map>
 #include <numeric>
+#include <sstream>
 
 namespace physreg {
 
@@ -74,16 +76,24 @@ TissueTable draw_ground_truth_tissues(MaterialSet set, const LabelRoles& roles, 
 
 namespace {
 
-std::vector<std::int32_t> posterior_face_nodes(const VolumeMesh& mesh, const std::vector<BoundaryFace>& faces)
+std::vector<std::int32_t> supported_face_nodes(const VolumeMesh& mesh, const std::vector<BoundaryFace>& faces, const OrganSupport& support)
 {
     std::vector<char> mark(mesh.node_count(), 0);
+    const Vec3 d = support.direction.normalized();
     for (const auto& f : faces)
-        if (f.normal.y() > 0.5)
+        if (f.normal.dot(d) > 0.5)
             for (int a = 0; a < f.count; ++a) mark[static_cast<std::size_t>(f.nodes[a])] = 1;
     std::vector<std::int32_t> out;
     for (std::size_t n = 0; n < mark.size(); ++n)
         if (mark[n]) out.push_back(static_cast<std::int32_t>(n));
+    if (out.empty()) fail("ground truth: no organ surface face faces {} (outward normal · ({:.2f}, {:.2f}, {:.2f}) > 0.5) to hold the organs by", support.name, d.x(), d.y(), d.z());
     return out;
+}
+
+std::string organ_support_text(const OrganSupport& s)
+{
+    const Vec3 d = s.direction.normalized();
+    return fmt::format("surface faces facing {} (outward normal · ({:.2f}, {:.2f}, {:.2f}) > 0.5) fixed", s.name, d.x(), d.y(), d.z());
 }
 
 // Cells kept by `keep`, nodes renumbered; `old_of_new` maps back.
@@ -141,8 +151,27 @@ void finish(GroundTruthModel& m, const TissueTable& tissues, double organ_cell_m
 
 } // namespace
 
+OrganSupport parse_organ_support(const std::string& text, const std::string& what)
+{
+    static const std::map<std::string, Vec3> named = {{"posterior", Vec3::UnitY()},  {"anterior", -Vec3::UnitY()}, {"superior", Vec3::UnitZ()},
+                                                      {"inferior", -Vec3::UnitZ()}, {"left", Vec3::UnitX()},      {"right", -Vec3::UnitX()}};
+    if (const auto it = named.find(text); it != named.end()) return {text, it->second};
+    std::vector<double> v;
+    std::stringstream in(text);
+    std::string item;
+    while (std::getline(in, item, ',')) {
+        const auto x = parse_number(item);
+        if (!x || !std::isfinite(*x)) fail("{}: '{}' is neither posterior, anterior, superior, inferior, left, right nor x,y,z", what, text);
+        v.push_back(*x);
+    }
+    if (v.size() != 3) fail("{}: '{}' is neither posterior, anterior, superior, inferior, left, right nor x,y,z", what, text);
+    const Vec3 d(v[0], v[1], v[2]);
+    if (!(d.norm() > 0.0)) fail("{}: '{}' must be a non-zero direction", what, text);
+    return {fmt::format("direction ({:g}, {:g}, {:g})", v[0], v[1], v[2]), d};
+}
+
 GroundTruthModel build_body_model(const LabelVolume& labels, const LabelRoles& roles, const TissueTable& tissues,
-                                  const GroundTruthMeshing& meshing, unsigned seed)
+                                  const GroundTruthMeshing& meshing, unsigned seed, const OrganSupport& organ_support)
 {
     meshing.validate();
     std::vector<char> seen(65536, 0); // labels present in the volume (a set per voxel would be slow)
@@ -174,8 +203,8 @@ GroundTruthModel build_body_model(const LabelVolume& labels, const LabelRoles& r
     if (m.mesh.cell_count() == 0) fail("ground-truth mesh: no tetrahedron of a deforming tissue");
     if (!has_body) {
         m.faces = boundary_faces(m.mesh);
-        m.supports.constraints.push_back({"posterior_support", posterior_face_nodes(m.mesh, m.faces), {true, true, true}, Vec3::Zero()});
-        m.support_description = "no body label: organ surface faces facing posterior (outward normal y > 0.5) fixed";
+        m.supports.constraints.push_back({organ_support.name + "_support", supported_face_nodes(m.mesh, m.faces, organ_support), {true, true, true}, Vec3::Zero()});
+        m.support_description = "no body label: organ " + organ_support_text(organ_support);
         finish(m, tissues, meshing.organ_cell_mm);
         return m;
     }
@@ -215,7 +244,7 @@ GroundTruthModel build_body_model(const LabelVolume& labels, const LabelRoles& r
     return m;
 }
 
-GroundTruthModel build_organ_model(const GroundTruthModel& body, const LabelRoles& roles, const TissueTable& tissues)
+GroundTruthModel build_organ_model(const GroundTruthModel& body, const LabelRoles& roles, const TissueTable& tissues, const OrganSupport& organ_support)
 {
     GroundTruthModel m;
     m.name = "organs";
@@ -223,8 +252,8 @@ GroundTruthModel build_organ_model(const GroundTruthModel& body, const LabelRole
     m.mesh = extract_cells(body.mesh, [&](std::int32_t l) { return roles.is_liver_tissue(l) || roles.kidney.count(l) > 0; }, new_of_old);
     if (m.mesh.cell_count() == 0) fail("ground truth: the body mesh has no organ tetrahedra");
     m.faces = boundary_faces(m.mesh);
-    m.supports.constraints.push_back({"posterior_support", posterior_face_nodes(m.mesh, m.faces), {true, true, true}, Vec3::Zero()});
-    m.support_description = "organs cut out of the body mesh; surface faces facing posterior (outward normal y > 0.5) fixed";
+    m.supports.constraints.push_back({organ_support.name + "_support", supported_face_nodes(m.mesh, m.faces, organ_support), {true, true, true}, Vec3::Zero()});
+    m.support_description = "organs cut out of the body mesh; " + organ_support_text(organ_support);
     finish(m, tissues, body.organ_cell_mm);
     return m;
 }

@@ -78,6 +78,7 @@ PartialSurfaceCase read_dataset_surface_case(const std::filesystem::path& direct
     if (!u || u->components != 3) fail("register-surface: the ground-truth mesh of state {} has no 3-component 'displacement'", state_name);
     c.truth_displacement = u->values;
     c.field_geometry = labels.geometry;
+    c.patient_frame = true;
     if (!vessels.empty())
         c.vessels = read_vessel_centrelines(vessels, settings.vessel_scale, settings.vessel_radius);
     else if (rest.files.count("vessel_centrelines"))

@@ -221,6 +221,7 @@ expect_no_file "$work/ph_bad1"
 expect_error "phantom: compression outside the body" "outside the body" "$physreg" phantom --preset small --compression X:400:0:5 -o "$work/ph_bad2"
 expect_no_file "$work/ph_bad2"
 expect_error "phantom: unknown material set" "unknown material set" "$physreg" phantom --preset small --materials rubber -o "$work/ph_bad3"
+expect_error "phantom: unknown organ support" "--organ-support: 'sideways' is neither" "$physreg" phantom --preset small --organ-support sideways -o "$work/ph_bad3"
 "$physreg" mesh --help >/dev/null
 printf 'x' > "$work/not_an_image.nii.gz"
 expect_error "phantom: corrupt label map" "not_an_image.nii.gz" "$physreg" phantom --from-labels "$work/not_an_image.nii.gz" -o "$work/ph_bad4"
@@ -431,7 +432,7 @@ expect_no_file "$work/ri_push/report.html"
 expect_ok "settings register-images" "$physreg" settings register-images
 grep -q "rms_tolerance" "$work/out.txt" && grep -q -- "--rms-tolerance" "$work/out.txt" && pass || failed "settings register-images lists keys and options"
 expect_ok "settings register-surface --json" "$physreg" settings register-surface --json
-python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['d90']['default'] == 5.0 and d['support']['choices'] == ['posterior', 'none']" "$work/out.txt" \
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert d['d90']['default'] == 5.0 and d['support']['choices'] == ['auto', 'posterior', 'springs', 'none']" "$work/out.txt" \
   && pass || failed "settings register-surface --json is the specification"
 expect_error "settings: unknown mode" "mode 'register-everything' has no settings specification" "$physreg" settings register-everything
 printf 'cycles: 4\ncel_size: 8\n' > "$work/typo.yaml"

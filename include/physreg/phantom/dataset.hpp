@@ -63,6 +63,8 @@ struct PhantomSpec {
     /// false: the organs alone, posterior faces fixed, the tool pressing the organs directly (no gel)
     /// — the pre-issue-17 setting, for studies of the liver models' own mechanics (and their tests).
     bool simulate_body = true;
+    /// Where the organs alone are held (the insufflation, the push and --organs-only states).
+    OrganSupport organ_support;
     double load_step_mm = 5.0;                ///< largest tool travel per Newton load step
     /// Run the small CalculiX validation of the ground-truth discretisation (needs ccx; the
     /// manifest says so when it is absent).

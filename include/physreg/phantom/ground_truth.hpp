@@ -59,12 +59,24 @@ struct GroundTruthModel {
     double organ_cell_mm = 0.0;
 };
 
+/// Where the organs alone are held (issue 46 item 6: a truth whose supports the registration is
+/// not told): the surface faces whose outward normal · `direction` > 0.5. `name` labels it in the
+/// manifest (posterior, the default, as the vena cava and ligaments hold a liver lying supine).
+struct OrganSupport {
+    std::string name = "posterior";
+    Vec3 direction = Vec3::UnitY();
+};
+/// An anatomical name (posterior, anterior, inferior, superior, left, right; LPS) or x,y,z.
+/// Throws Error naming `what`.
+OrganSupport parse_organ_support(const std::string& text, const std::string& what);
+
 /// The body model (the organs and the gel, bone removed) when the label map has a body label;
-/// otherwise the organs alone with their posterior faces fixed.
+/// otherwise the organs alone, held at `organ_support`.
 GroundTruthModel build_body_model(const LabelVolume& labels, const LabelRoles& roles, const TissueTable& tissues,
-                                  const GroundTruthMeshing& meshing, unsigned seed);
-/// The organs (every liver-role and kidney tissue) cut out of `body`, posterior faces fixed.
-GroundTruthModel build_organ_model(const GroundTruthModel& body, const LabelRoles& roles, const TissueTable& tissues);
+                                  const GroundTruthMeshing& meshing, unsigned seed, const OrganSupport& organ_support = {});
+/// The organs (every liver-role and kidney tissue) cut out of `body`, held at `organ_support`.
+GroundTruthModel build_organ_model(const GroundTruthModel& body, const LabelRoles& roles, const TissueTable& tissues,
+                                   const OrganSupport& organ_support = {});
 
 struct GroundTruthSolve {
     std::vector<double> displacement_mm;

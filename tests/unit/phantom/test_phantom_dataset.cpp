@@ -296,6 +296,49 @@ TEST(PhantomDataset, BadInputIsRefusedAndLeavesNothing)
     EXPECT_NE(test::error_message([] { parse_label_roles("spleen=4", "--label-roles"); }).find("unknown role"), std::string::npos);
 }
 
+// Issue 46 item 6: the organs alone may be held elsewhere than posterior, so that a registration
+// which assumes the generator's convention meets a truth that does not share it.
+TEST(PhantomDataset, OrgansAloneAreHeldWhereAsked)
+{
+    EXPECT_EQ(parse_organ_support("inferior", "--organ-support").direction, Vec3(0, 0, -1));
+    EXPECT_EQ(parse_organ_support("posterior", "--organ-support").direction, Vec3(0, 1, 0));
+    const OrganSupport tilted = parse_organ_support("1,0,-1", "--organ-support");
+    EXPECT_EQ(tilted.direction, Vec3(1, 0, -1));
+    EXPECT_NE(tilted.name.find("direction"), std::string::npos);
+    EXPECT_NE(test::error_message([] { parse_organ_support("sideways", "--organ-support"); }).find("--organ-support: 'sideways' is neither"), std::string::npos);
+    EXPECT_NE(test::error_message([] { parse_organ_support("0,0,0", "--organ-support"); }).find("non-zero"), std::string::npos);
+    EXPECT_NE(test::error_message([] { parse_organ_support("1,nan,0", "--organ-support"); }).find("neither"), std::string::npos);
+
+    // A 40 × 30 × 30 mm block of liver (label 2), 2 mm voxels, no body label: the organs alone.
+    LabelVolume labels;
+    labels.geometry.size = {24, 19, 19};
+    labels.geometry.spacing = Vec3(2, 2, 2);
+    labels.labels.assign(static_cast<std::size_t>(labels.geometry.voxel_count()), 0);
+    for (std::int64_t k = 2; k < 17; ++k)
+        for (std::int64_t j = 2; j < 17; ++j)
+            for (std::int64_t i = 2; i < 22; ++i) labels.labels[static_cast<std::size_t>(labels.geometry.linear_index(i, j, k))] = 2;
+    LabelRoles roles;
+    roles.liver = {2};
+    nlohmann::json ranges;
+    const TissueTable tissues = draw_ground_truth_tissues(MaterialSet::healthy, roles, {0, 2}, 5, ranges);
+    GroundTruthMeshing meshing = PhantomSpec::preset_spec("small").ground_truth_mesh;
+    for (const auto& [name, direction] : std::vector<std::pair<std::string, Vec3>>{{"inferior", Vec3(0, 0, -1)}, {"right", Vec3(-1, 0, 0)}}) {
+        SCOPED_TRACE(name);
+        const GroundTruthModel m = build_body_model(labels, roles, tissues, meshing, 3, parse_organ_support(name, "--organ-support"));
+        ASSERT_EQ(m.name, "organs");
+        ASSERT_EQ(m.supports.constraints.size(), 1u);
+        EXPECT_EQ(m.supports.constraints[0].name, name + "_support");
+        EXPECT_NE(m.support_description.find("facing " + name), std::string::npos) << m.support_description;
+        // Every held node lies on the block's face that looks that way (within a ground-truth cell:
+        // the mesher rounds the block's edges), none on the other side of the 30 mm thick block.
+        double extreme = -1e300;
+        for (const auto& x : m.mesh.nodes) extreme = std::max(extreme, x.dot(direction));
+        ASSERT_GT(m.supports.constraints[0].nodes.size(), 10u);
+        for (const auto n : m.supports.constraints[0].nodes)
+            EXPECT_GT(m.mesh.nodes[static_cast<std::size_t>(n)].dot(direction), extreme - meshing.organ_cell_mm);
+    }
+}
+
 TEST(PhantomAnatomy, PresetMatchesThePhantomsMeasuredSize)
 {
     const LabelVolume v = make_cirs057a_phantom(2.0);

@@ -4,7 +4,7 @@
 // Python's physreg.register_partial_surface call. Read top to bottom in partial_surface_registration.cpp:
 //   1. the model: co-rotational tetrahedra, and for the heterogeneous kind Glisson's capsule
 //      (membrane) and the vessels (embedded beams);
-//   2. the supports: posterior surface, picked points, regions, node ids;
+//   2. the supports, as hypotheses (named, posterior in a patient frame, springs, none) chosen by the data;
 //   3. the methods: labelled rigid and plain ICP (multi-start, supports judge plausibility), the
 //      biomechanical registration (arctan pair forces annealed, backward Euler), and the adjoint
 //      method when asked;
@@ -47,10 +47,11 @@ struct PartialSurfaceSettings {
     double distance_fraction = 0.9;
     double max_pair_distance = 40.0;          ///< mm
     double normal_agreement = 0.7;
-    std::string support = "posterior";        ///< posterior, none
+    std::string support = "auto";             ///< auto (hypotheses chosen by the data), posterior, springs, none
     double support_radius = 10.0;             ///< mm, around support points
     std::vector<std::int32_t> support_region; ///< surface region labels held
     double support_stiffness = 0.0;           ///< N/mm; 0: held
+    double spring_stiffness = 0.0;            ///< N/mm, the springs hypothesis; 0: 0.01 × E × mean edge
     double support_tolerance = 3.0;           ///< mm
     double noise = 0.5;                       ///< mm, the adjoint method's discrepancy principle
     double time_step = 0.1;                   ///< s
@@ -89,6 +90,9 @@ struct PartialSurfaceCase {
     std::optional<VolumeMesh> truth_mesh;     ///< a truth's mesh with its nodal displacement (nodal error)
     std::vector<double> truth_displacement;
     std::optional<ImageGeometry> field_geometry; ///< the dense field's grid (else one over the mesh)
+    /// The model's coordinates are a patient frame (LPS): a label volume's physical space. Only then
+    /// does the posterior surface mean anything, and --support auto offers it.
+    bool patient_frame = false;
     nlohmann::json description = nlohmann::json::object();
 };
 
