@@ -56,7 +56,8 @@ void add_subcommand_phantom(CLI::App& app)
     sub->add_option("--materials", o->materials, "Literature values the ground-truth moduli are drawn around: paper000 (default), "
                                                  "healthy or cirrhotic (paper 001)");
     sub->add_option("--depths", o->depths, "Tool travel on the skin from first contact of the default compressions A, B, … (one "
-                                           "per depth, 1 to 5), mm (default 20,25,20,15,22; small: 12,15,12,10,12)");
+                                           "per depth, 1 to 5), mm (default 20,25,20,15,22; small: 12,15,12,10,12); none: no compression "
+                                           "(the insufflation and the push only)");
     sub->add_option("--load-step", o->load_step, "Largest tool travel per Newton load step of the ground truth, mm (default 5; small: 4)");
     sub->add_flag("--organs-only", o->organs_only, "Simulate the organs alone, posterior faces fixed, the tool pressing them directly "
                                                    "(no gel: for studies of the liver models' own mechanics)");
@@ -108,7 +109,10 @@ void add_subcommand_phantom(CLI::App& app)
         spec.simulate_body = !o->organs_only;
         spec.organ_support = parse_organ_support(o->organ_support, "--organ-support");
         spec.materials = parse_material_set(o->materials);
-        if (!o->depths.empty()) spec.depths_mm = parse_number_list(o->depths, "--depths");
+        if (o->depths == "none")
+            spec.depths_mm.clear(); // the insufflation and the push only (studies of the organs' own states)
+        else if (!o->depths.empty())
+            spec.depths_mm = parse_number_list(o->depths, "--depths");
         spec.tool.shape = parse_indenter_shape(o->tool);
         if (spec.tool.shape == IndenterShape::plane) fail("--tool: a plane has no position over the liver; use sphere, cylinder or box");
         if (o->tool_radius) spec.tool.radius_mm = *o->tool_radius;

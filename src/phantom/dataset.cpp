@@ -123,8 +123,11 @@ void PhantomSpec::validate() const
         if (!std::isfinite(c.x_mm) || !std::isfinite(c.z_mm)) fail("phantom: compression {}: position is not finite", c.name);
         if (!(c.direction.norm() > 0.0) || !c.direction.allFinite()) fail("phantom: compression {}: direction must be a non-zero vector", c.name);
     }
-    if (compressions.empty() && (depths_mm.empty() || depths_mm.size() > 5))
+    if (compressions.empty() && depths_mm.size() > 5)
         fail("phantom: {} depths given; the default compressions take 1 to 5 (A, B, … in order)", depths_mm.size());
+    // No compression at all (--depths none) is for studies of the organs' own states: one of them must remain.
+    if (compressions.empty() && depths_mm.empty() && !(push_depth_mm > 0) && insufflation_pa && !(*insufflation_pa > 0))
+        fail("phantom: no compression (--depths none), no insufflation and no push: the dataset would have no deformed state");
     for (const double d : depths_mm)
         if (!(d > 0.0 && d <= 60.0)) fail("phantom: depth {} mm outside (0, 60]", d);
     if (!(tool.radius_mm > 0.0) || !std::isfinite(tool.radius_mm)) fail("phantom: tool radius {} mm must be > 0", tool.radius_mm);

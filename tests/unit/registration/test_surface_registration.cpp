@@ -651,33 +651,42 @@ TEST(PartialSurfaceSafeguard, ADeformableAnswerThatFitsWorseThanTheRigidFitGives
     };
     const nlohmann::json determined = {{"pose_determined", true}, {"notes", nlohmann::json::array()}};
     // The case: biomechanical 11.5 mm from the cloud, rigid 8.8, at rest 12: the rigid fit is written.
-    const auto worse = judge_deformable_answer(methods(12.0, 8.8, 11.5), determined, true, "biomechanical", "conservative");
+    const auto worse = judge_deformable_answer(methods(12.0, 8.8, 11.5), determined, true, "biomechanical", "conservative", 0.6);
     ASSERT_EQ(worse.flags.size(), 1u);
     EXPECT_NE(worse.flags[0].find("worse than the rigid fit (11.50 against 8.80 mm"), std::string::npos) << worse.flags[0];
     EXPECT_EQ(worse.answer, "rigid");
     EXPECT_NE(worse.statement.find("safeguard keep writes biomechanical anyway"), std::string::npos) << worse.statement;
     // keep: flagged, kept.
-    const auto kept = judge_deformable_answer(methods(12.0, 8.8, 11.5), determined, true, "biomechanical", "keep");
+    const auto kept = judge_deformable_answer(methods(12.0, 8.8, 11.5), determined, true, "biomechanical", "keep", 0.6);
     EXPECT_EQ(kept.answer, "biomechanical");
     EXPECT_EQ(kept.flags.size(), 1u);
     // Worse than at rest too, and the rigid starts disagree: the model at rest is written.
-    const auto both = judge_deformable_answer(methods(5.0, 4.0, 6.0), determined, false, "biomechanical", "conservative");
+    const auto both = judge_deformable_answer(methods(5.0, 4.0, 6.0), determined, false, "biomechanical", "conservative", 0.6);
     EXPECT_EQ(both.flags.size(), 2u);
     EXPECT_EQ(both.answer, "at_rest");
     // A rigid fit worse than rest: rest is the conservative answer.
-    EXPECT_EQ(judge_deformable_answer(methods(5.0, 7.0, 8.0), determined, true, "biomechanical", "conservative").answer, "at_rest");
+    EXPECT_EQ(judge_deformable_answer(methods(5.0, 7.0, 8.0), determined, true, "biomechanical", "conservative", 0.6).answer, "at_rest");
     // Within the tolerance (5 % and 0.1 mm): no flag. 0.84 against 0.80 is 5 % but only 0.04 mm.
-    const auto close = judge_deformable_answer(methods(5.0, 0.80, 0.84), determined, true, "biomechanical", "conservative");
+    const auto close = judge_deformable_answer(methods(5.0, 0.80, 0.84), determined, true, "biomechanical", "conservative", 0.6);
     EXPECT_TRUE(close.flags.empty()) << close.statement;
     EXPECT_EQ(close.answer, "biomechanical");
     // The data do not determine the pose: flagged even when the fit is good.
     const nlohmann::json undetermined = {{"pose_determined", false}, {"notes", {"biomechanical and adjoint fit the cloud alike but place the model 6 mm apart"}}};
-    const auto alike = judge_deformable_answer(methods(5.0, 2.0, 0.5), undetermined, true, "biomechanical", "conservative");
+    const auto alike = judge_deformable_answer(methods(5.0, 2.0, 0.5), undetermined, true, "biomechanical", "conservative", 0.6);
     ASSERT_EQ(alike.flags.size(), 1u);
     EXPECT_NE(alike.flags[0].find("6 mm apart"), std::string::npos);
     EXPECT_EQ(alike.answer, "rigid");
+    // The model at rest already meets the cloud to the noise (0.55 ≤ 0.6 mm): no motion the data
+    // resolve, so the model at rest is written even though the rigid fit is closer.
+    const auto still = judge_deformable_answer(methods(0.55, 0.50, 0.45), determined, true, "biomechanical", "conservative", 0.6);
+    ASSERT_EQ(still.flags.size(), 1u);
+    EXPECT_NE(still.flags[0].find("no motion beyond it"), std::string::npos) << still.flags[0];
+    EXPECT_EQ(still.answer, "at_rest");
+    EXPECT_TRUE(judge_deformable_answer(methods(0.65, 0.50, 0.45), determined, true, "biomechanical", "conservative", 0.6).flags.empty());
+    // …unless the result removes most of the residual: a local motion the mean hid (0.44 → 0.11 mm).
+    EXPECT_TRUE(judge_deformable_answer(methods(0.44, 0.37, 0.11), determined, true, "biomechanical", "conservative", 0.6).flags.empty());
     // A rigid answer asked for is not judged.
-    EXPECT_TRUE(judge_deformable_answer(methods(5.0, 7.0, 8.0), determined, true, "rigid", "conservative").flags.empty());
+    EXPECT_TRUE(judge_deformable_answer(methods(5.0, 7.0, 8.0), determined, true, "rigid", "conservative", 0.6).flags.empty());
 }
 
 } // namespace physreg

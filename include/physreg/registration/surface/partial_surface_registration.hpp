@@ -127,11 +127,14 @@ struct PartialSurfaceResult {
 /// The safeguard's judgement, as register_partial_surface makes it: `evaluated` holds per method
 /// name {"cloud_to_model_mm": {"mean": …}} (at_rest, and rigid when run); `determinacy` is
 /// {"pose_determined": bool, "notes": [...]}. A deformable `requested` answer (biomechanical,
-/// adjoint) fitting the cloud worse than the rigid fit or than at rest (by more than 5 % and
-/// 0.1 mm), or undetermined, is flagged; `setting` conservative then answers rigid (at rest when
-/// that fits better or `rigid_pose_determined` is false), keep keeps it.
+/// adjoint) is flagged when it fits the cloud worse than the rigid fit or than at rest (by more than
+/// 5 % and 0.1 mm), when the data do not determine it, or when the model left at rest already meets
+/// the cloud to `noise_level_mm` (mean distance; 1.2 × the noise σ) and the answer removes less than
+/// half of that residual: the data show no motion.
+/// `setting` conservative then answers rigid (at rest when that fits better, the rigid starts
+/// disagree, or at rest meets the noise), keep keeps it.
 PartialSurfaceSafeguard judge_deformable_answer(const nlohmann::json& evaluated, const nlohmann::json& determinacy, bool rigid_pose_determined,
-                                                const std::string& requested, const std::string& setting);
+                                                const std::string& requested, const std::string& setting, double noise_level_mm);
 
 /// Runs the pipeline. `progress(fraction, message)`. Throws Error for bad input (supports off the
 /// model, a cloud far from it) and when the chosen method fails.
