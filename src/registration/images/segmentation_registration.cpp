@@ -7,6 +7,7 @@
 
 #include "physreg/mesh/tet_split.hpp"
 #include "physreg/registration/images/segmentation_alignment.hpp"
+#include "physreg/registration/images/segmentation_forms.hpp"
 
 #include <fmt/format.h>
 #include <lbfgs.h>
@@ -444,22 +445,18 @@ struct PhaseContext {
     std::vector<std::size_t> estimated; ///< structures of the modulus phase
     int evaluations = 0;
     bool modulus_phase = false;
-    double prior_weight = 0.0;          ///< N r² / (ln f)², mm² (0: no prior)
-    std::vector<double> prior_log_moduli; ///< ln E⁰ per structure
+    ModuliPriorForm prior;              ///< weight N r² / (ln f)², mm² (0: no prior), around ln E⁰ per structure
 };
 
-/// Π = ½ w Σ_(j estimated) (ln E_j − ln E_j⁰)²; its gradient in ln E_j when asked.
+/// Π = ½ w Σ_(j estimated) (ln E_j − ln E_j⁰)² (the prior form of the log-moduli); its gradient in ln E_j when asked.
 double moduli_prior(const PhaseContext& p, const std::vector<double>& e, std::vector<double>* d_log = nullptr)
 {
     if (d_log) d_log->assign(e.size(), 0.0);
-    if (p.prior_weight == 0.0) return 0.0;
-    double value = 0.0;
-    for (auto j : p.estimated) {
-        const double r = std::log(e[j]) - p.prior_log_moduli[j];
-        value += 0.5 * p.prior_weight * r * r;
-        if (d_log) (*d_log)[j] = p.prior_weight * r;
-    }
-    return value;
+    if (p.prior.weight_mm2() == 0.0) return 0.0;
+    std::vector<double> log_moduli(e.size());
+    for (std::size_t j = 0; j < e.size(); ++j) log_moduli[j] = std::log(e[j]);
+    if (d_log) p.prior.gradient(log_moduli, *d_log);
+    return p.prior.value(log_moduli);
 }
 
 lbfgsfloatval_t evaluate_phase(void* instance, const lbfgsfloatval_t* v, lbfgsfloatval_t* g, const int n, const lbfgsfloatval_t)
@@ -557,11 +554,14 @@ SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, con
         x *= best_alpha;
     }
 
-    PhaseContext context{&model, &objective, &force_nodes, mode, scale, &x, model.young_moduli_pa(), estimated, evaluations, false, 0.0, {}};
+    PhaseContext context{&model, &objective, &force_nodes, mode, scale, &x, model.young_moduli_pa(), estimated, evaluations, false, {}};
     if (options.moduli_prior_factor > 0.0) {
         const double log_factor = std::log(options.moduli_prior_factor);
-        context.prior_weight = static_cast<double>(objective.term_count()) * options.moduli_prior_rms_mm * options.moduli_prior_rms_mm / (log_factor * log_factor);
-        for (double e : initial_moduli_pa) context.prior_log_moduli.push_back(std::log(e));
+        std::vector<double> mean;
+        for (double e : initial_moduli_pa) mean.push_back(std::log(e));
+        context.prior = ModuliPriorForm(static_cast<double>(objective.term_count()) * options.moduli_prior_rms_mm * options.moduli_prior_rms_mm /
+                                            (log_factor * log_factor),
+                                        std::move(mean), estimated);
     }
     const auto rms_of = [&](double data) { return std::sqrt(2.0 * data / static_cast<double>(objective.term_count())); };
     double phi = evaluate(x).objective_mm2;

@@ -149,6 +149,18 @@ double ArctanForceLaw::sigma_per_mm() const { return std::tan(0.9 * std::numbers
 
 double ArctanForceLaw::magnitude(double k, double d) const { return k * (2 / std::numbers::pi) * std::atan(sigma_per_mm() * d); }
 
+double ArctanForceLaw::potential(double k, double d) const
+{
+    const double sigma = sigma_per_mm();
+    return k * (2 / std::numbers::pi) * (d * std::atan(sigma * d) - std::log1p(sigma * sigma * d * d) / (2 * sigma));
+}
+
+double ArctanForceLaw::radial_stiffness(double k, double d) const
+{
+    const double sigma = sigma_per_mm();
+    return k * (2 / std::numbers::pi) * sigma / (1 + sigma * sigma * d * d);
+}
+
 double ArctanForceLaw::stiffness_bound(double k, double d) const
 {
     const double sigma = sigma_per_mm();

@@ -4,6 +4,7 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/evaluation/surface_distance.hpp"
+#include "physreg/mechanics/forms/mechanics_forms.hpp"
 #include "physreg/registration/surface/surface_model.hpp"
 #include "../detail/principal_axes.hpp"
 
@@ -105,6 +106,9 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
     // The state at the end of the last plateau that completed: what is kept when a later plateau's
     // forces fold an element (issue 46: numerical trouble backs the method off, it never ends the run).
     std::vector<double> last_good(n, 0.0);
+    // Elastic supports: springs to rest at the support nodes (a Form, mechanics/forms).
+    const SpringForm elastic_supports(model.node_count(), options.support_stiffness_n_per_mm > 0 ? options.fixed_nodes : std::vector<std::int32_t>{},
+                                      options.support_stiffness_n_per_mm);
     for (int plateau = 0; plateau < plateaus && result.stopped.empty(); ++plateau) {
         const auto plateau_start = std::chrono::steady_clock::now();
         PlateauReport report;
@@ -126,13 +130,7 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
             std::fill(stiffness.begin(), stiffness.end(), 0.0);
             accumulate_pair_forces(pairs, matcher.source(), report.stiffness_n, options.force, forces, &stiffness);
             const bool elastic_support = options.support_stiffness_n_per_mm > 0;
-            if (elastic_support)
-                for (const auto node : options.fixed_nodes)
-                    for (int d = 0; d < 3; ++d) {
-                        const auto q = 3 * static_cast<std::size_t>(node) + static_cast<std::size_t>(d);
-                        forces[q] -= options.support_stiffness_n_per_mm * u[q];
-                        stiffness[q] += options.support_stiffness_n_per_mm;
-                    }
+            if (elastic_support) elastic_supports.add_restoring(u, forces, stiffness);
             Loads loads;
             loads.external_forces_n = forces;
             if (!options.fixed_nodes.empty() && !elastic_support)

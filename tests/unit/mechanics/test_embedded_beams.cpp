@@ -4,7 +4,9 @@
 // GCC 12's own AVX-512 header (avx512fintrin.h, _mm512_extractf64x4_pd) warns "__Y is used
 // uninitialized" when Eigen's 12 × 12 norm below is inlined into this test: the header's code, not ours.
 #pragma GCC diagnostic ignored "-Wuninitialized"
+#include "form_cases.hpp"
 #include "mechanics_fixtures.hpp"
+#include "physreg/mechanics/forms/mechanics_forms.hpp"
 #include "physreg/mechanics/implicit/backward_euler.hpp"
 #include "physreg/mechanics/elements/embedded_beams.hpp"
 
@@ -51,6 +53,37 @@ struct Bar {
     std::vector<VesselBranch> vessel{{{Vec3(0.01, 5.9, 6.1), Vec3(99.99, 5.9, 6.1)}, {1.0, 1.0}}};
 };
 } // namespace
+
+// The beams' forces are ∂E/∂u of their co-rotational energy (to the co-rotational approximation:
+// the frame's derivative is left out) on a bent, twisted bar, and their tangent at rest is exact:
+// Forms run by test_forms.cpp.
+const test::RegisterFormCase beams_bent{"EmbeddedBeams", "a vessel in a bent bar", [] {
+    const Bar bar;
+    const EmbeddedBeams beams(bar.mesh, bar.vessel, BeamMaterial{}, 2.0, "bar vessel");
+    std::vector<double> u(3 * bar.mesh.node_count());
+    for (std::size_t n = 0; n < bar.mesh.node_count(); ++n) {
+        const Vec3& x = bar.mesh.nodes[n];
+        const double s = x.x() / 100.0;
+        u[3 * n + 1] = 0.8 * s * s + 0.01 * std::sin(1.7 * static_cast<double>(n)); // bending, and a rough part
+        u[3 * n + 2] = 0.05 * s * (x.y() - 6.0);                                   // a twist
+    }
+    test::FormCheckResult out{check_derivatives(AuxiliaryElementsForm(beams, bar.mesh.node_count(), "vessel beams"), u), 5e-4}; // measured 7e-5
+    out.expect_hessian = false; // no assembler given: the tangent is checked at rest below
+    return out;
+}};
+const test::RegisterFormCase beams_at_rest{"EmbeddedBeams", "tangent at rest", [] {
+    const Bar bar;
+    const EmbeddedBeams beams(bar.mesh, bar.vessel, BeamMaterial{}, 2.0, "bar vessel");
+    TledOptions options;
+    options.law = MaterialLaw::corotational;
+    const TledModel model(bar.mesh, test::one_tissue(6.2, 0.3), options);
+    const StiffnessAssembler assembler(model, nullptr, beams.stencils());
+    test::FormCheckResult out{check_derivatives(AuxiliaryElementsForm(beams, bar.mesh.node_count(), "vessel beams", &assembler),
+                                                std::vector<double>(3 * bar.mesh.node_count(), 0.0)),
+                              1e-6, 1e-5}; // measured 2.6e-7 (round-off of 7 500 unknowns)
+    out.expect_gradient = false; // at rest the force vanishes
+    return out;
+}};
 
 TEST(EmbeddedBeams, RigidMotionsOfTheHostCarryNoBeamForce)
 {

@@ -1,7 +1,10 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 // Implicit mechanics: material tangents, the assembled stiffness, contact terms and the Newton
-// solver, checked against finite differences, analytical solutions and dynamic relaxation.
+// solver, checked against finite differences (as Forms, run by test_forms.cpp), analytical
+// solutions and dynamic relaxation.
+#include "form_cases.hpp"
 #include "mechanics_fixtures.hpp"
+#include "physreg/mechanics/forms/mechanics_forms.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/mechanics/implicit/newton_solver.hpp"
 #include "physreg/mechanics/implicit/stiffness_assembly.hpp"
@@ -12,6 +15,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <tuple>
 #include <cstring>
 #include <omp.h>
 #include <iostream>
@@ -41,45 +45,6 @@ double max_abs(const std::vector<double>& v)
     return m;
 }
 
-// ‖K v − (f(u + h v) − f(u − h v)) / 2h‖∞ / ‖K v‖∞ for a few random directions v.
-double tangent_error(const StiffnessAssembler& assembler, const std::vector<double>& u)
-{
-    const std::size_t n = u.size();
-    SparseMatrix k = assembler.make_matrix();
-    std::vector<double> f(n);
-    EXPECT_LT(assembler.assemble(u.data(), f.data(), &k).inverted_element, 0);
-    double worst = 0.0;
-    for (std::uint32_t seed = 1; seed <= 3; ++seed) {
-        const auto v = random_vector(n, 1.0, 100 + seed);
-        const double h = 1e-6;
-        std::vector<double> up(n), um(n), fp(n), fm(n);
-        for (std::size_t i = 0; i < n; ++i) up[i] = u[i] + h * v[i], um[i] = u[i] - h * v[i];
-        assembler.assemble(up.data(), fp.data(), nullptr);
-        assembler.assemble(um.data(), fm.data(), nullptr);
-        const Eigen::VectorXd kv = k * Eigen::Map<const Eigen::VectorXd>(v.data(), n);
-        double diff = 0.0;
-        for (std::size_t i = 0; i < n; ++i) diff = std::max(diff, std::abs(kv[i] - (fp[i] - fm[i]) / (2 * h)));
-        worst = std::max(worst, diff / kv.cwiseAbs().maxCoeff());
-    }
-    return worst;
-}
-
-// Energy gradient = internal force: (W(u + h v) − W(u − h v)) / 2h against f·v.
-double gradient_error(const StiffnessAssembler& assembler, const std::vector<double>& u)
-{
-    const std::size_t n = u.size();
-    std::vector<double> f(n), scratch(n);
-    assembler.assemble(u.data(), f.data(), nullptr);
-    const auto v = random_vector(n, 1.0, 7);
-    const double h = 1e-6;
-    std::vector<double> up(n), um(n);
-    for (std::size_t i = 0; i < n; ++i) up[i] = u[i] + h * v[i], um[i] = u[i] - h * v[i];
-    const double fd = (assembler.energy(up.data()).energy_mj - assembler.energy(um.data()).energy_mj) / (2 * h);
-    double fv = 0;
-    for (std::size_t i = 0; i < n; ++i) fv += f[i] * v[i];
-    return std::abs(fd - fv) / std::abs(fv);
-}
-
 VolumeMesh distorted(VolumeMesh mesh, double amplitude_mm)
 {
     mesh.grid.reset();
@@ -100,60 +65,65 @@ NewtonOptions tight_newton()
 
 } // namespace
 
-TEST(MechanicsImplicit, MaterialTangentMatchesFiniteDifferencesOfTheStress)
+// Each law as a Form of F: P = ∂Ψ/∂F and the material tangent ∂P/∂F (test_forms.cpp runs the checker).
+FormCheckResult material_law_case(MaterialLaw law)
 {
     const ElasticMaterial m = material_from_tissue({1, "t", 2e5, 0.49, 1000});
-    for (MaterialLaw law : {MaterialLaw::neo_hookean, MaterialLaw::st_venant_kirchhoff, MaterialLaw::linear_elastic,
-                            MaterialLaw::corotational}) {
-        double a[81];
-        first_piola_tangent(law, m, kF, a);
-        double worst = 0.0, largest = 0.0;
-        for (int kl = 0; kl < 9; ++kl) {
-            double fp[9], fm[9], pp[9], pm[9];
-            std::copy(kF, kF + 9, fp);
-            std::copy(kF, kF + 9, fm);
-            const double h = 1e-6;
-            fp[kl] += h;
-            fm[kl] -= h;
-            first_piola_kirchhoff<double>(law, m.mu_mpa, m.lambda_mpa, m.kappa_mpa, fp, pp);
-            first_piola_kirchhoff<double>(law, m.mu_mpa, m.lambda_mpa, m.kappa_mpa, fm, pm);
-            for (int ij = 0; ij < 9; ++ij) {
-                worst = std::max(worst, std::abs(a[9 * ij + kl] - (pp[ij] - pm[ij]) / (2 * h)));
-                largest = std::max(largest, std::abs(a[9 * ij + kl]));
-            }
-        }
-        EXPECT_LT(worst, 1e-7 * largest) << to_string(law) << ": " << worst << " of " << largest;
-    }
+    FiniteDifferenceOptions o;
+    o.random_directions = 3;
+    return {check_derivatives(StrainEnergyDensityForm(law, m), std::vector<double>(kF, kF + 9), o), 1e-7, 1e-7};
 }
+const RegisterFormCase neo_hookean_law{"StrainEnergyDensityForm", "neo-Hookean", [] { return material_law_case(MaterialLaw::neo_hookean); }};
+const RegisterFormCase svk_law{"StrainEnergyDensityForm", "St Venant-Kirchhoff", [] { return material_law_case(MaterialLaw::st_venant_kirchhoff); }};
+const RegisterFormCase linear_law{"StrainEnergyDensityForm", "linear elastic", [] { return material_law_case(MaterialLaw::linear_elastic); }};
+const RegisterFormCase corotational_law{"StrainEnergyDensityForm", "co-rotational", [] { return material_law_case(MaterialLaw::corotational); }};
 
-TEST(MechanicsImplicit, AssembledTangentMatchesFiniteDifferencesOfTheForces)
+// The assembled energy, internal forces and tangent of each element and law at strains of ≈ 10 %,
+// with no symmetry (distorted meshes).
+FormCheckResult elastic_case(const VolumeMesh& mesh, MaterialLaw law)
 {
-    const VolumeMesh grid = block_mesh(4, 3, 3, 1.5);
-    struct Case {
-        const char* name;
-        VolumeMesh mesh;
-        MaterialLaw law;
-    };
-    const std::vector<Case> cases = {{"grid hexahedra, neo-Hookean", grid, MaterialLaw::neo_hookean},
-                                     {"distorted hexahedra, neo-Hookean", distorted(grid, 0.2), MaterialLaw::neo_hookean},
-                                     {"distorted hexahedra, SVK", distorted(grid, 0.2), MaterialLaw::st_venant_kirchhoff},
-                                     {"tetrahedra, neo-Hookean", split_hexahedra_into_tetrahedra(distorted(grid, 0.2)), MaterialLaw::neo_hookean},
-                                     {"tetrahedra, linear", split_hexahedra_into_tetrahedra(grid), MaterialLaw::linear_elastic},
-                                     {"tetrahedra, co-rotational", split_hexahedra_into_tetrahedra(distorted(grid, 0.2)), MaterialLaw::corotational},
-                                     {"distorted hexahedra, co-rotational", distorted(grid, 0.2), MaterialLaw::corotational}};
-    for (const auto& c : cases) {
+    TledOptions options;
+    options.law = law;
+    const TledModel model(mesh, one_tissue(2e5, 0.49), options);
+    const StiffnessAssembler assembler(model);
+    FiniteDifferenceOptions o;
+    o.random_directions = 3;
+    return {check_derivatives(ElasticForm(assembler), random_vector(3 * model.node_count(), 0.08, 11), o), 1e-6, 1e-6};
+}
+const VolumeMesh& small_grid()
+{
+    static const VolumeMesh grid = block_mesh(4, 3, 3, 1.5);
+    return grid;
+}
+const RegisterFormCase elastic_grid{"ElasticForm", "grid hexahedra, neo-Hookean", [] { return elastic_case(small_grid(), MaterialLaw::neo_hookean); }};
+const RegisterFormCase elastic_hex_nh{"ElasticForm", "distorted hexahedra, neo-Hookean",
+                                      [] { return elastic_case(distorted(small_grid(), 0.2), MaterialLaw::neo_hookean); }};
+const RegisterFormCase elastic_hex_svk{"ElasticForm", "distorted hexahedra, SVK",
+                                       [] { return elastic_case(distorted(small_grid(), 0.2), MaterialLaw::st_venant_kirchhoff); }};
+const RegisterFormCase elastic_tet_nh{"ElasticForm", "tetrahedra, neo-Hookean",
+                                      [] { return elastic_case(split_hexahedra_into_tetrahedra(distorted(small_grid(), 0.2)), MaterialLaw::neo_hookean); }};
+const RegisterFormCase elastic_tet_linear{"ElasticForm", "tetrahedra, linear",
+                                          [] { return elastic_case(split_hexahedra_into_tetrahedra(small_grid()), MaterialLaw::linear_elastic); }};
+const RegisterFormCase elastic_tet_corot{"ElasticForm", "tetrahedra, co-rotational",
+                                         [] { return elastic_case(split_hexahedra_into_tetrahedra(distorted(small_grid(), 0.2)), MaterialLaw::corotational); }};
+const RegisterFormCase elastic_hex_corot{"ElasticForm", "distorted hexahedra, co-rotational",
+                                         [] { return elastic_case(distorted(small_grid(), 0.2), MaterialLaw::corotational); }};
+
+TEST(MechanicsImplicit, AssembledTangentIsSymmetric)
+{
+    // Its agreement with the forces' derivative is the ElasticForm cases of test_forms.cpp.
+    for (const auto& [name, mesh, law] : {std::tuple{"tetrahedra, neo-Hookean", split_hexahedra_into_tetrahedra(distorted(small_grid(), 0.2)), MaterialLaw::neo_hookean},
+                                          std::tuple{"distorted hexahedra, co-rotational", distorted(small_grid(), 0.2), MaterialLaw::corotational}}) {
         TledOptions options;
-        options.law = c.law;
-        const TledModel model(c.mesh, one_tissue(2e5, 0.49), options);
+        options.law = law;
+        const TledModel model(mesh, one_tissue(2e5, 0.49), options);
         const StiffnessAssembler assembler(model);
-        const auto u = random_vector(3 * model.node_count(), 0.08, 11); // strains of ≈ 10 %, no symmetry
-        EXPECT_LT(tangent_error(assembler, u), 1e-6) << c.name;
-        EXPECT_LT(gradient_error(assembler, u), 1e-6) << c.name;
+        const auto u = random_vector(3 * model.node_count(), 0.08, 11);
         SparseMatrix k = assembler.make_matrix();
         std::vector<double> f(u.size());
-        assembler.assemble(u.data(), f.data(), &k);
+        EXPECT_LT(assembler.assemble(u.data(), f.data(), &k).inverted_element, 0) << name;
         const SparseMatrix kt = k.transpose();
-        EXPECT_LT((k - kt).norm(), 1e-10 * k.norm()) << c.name << ": the tangent is not symmetric";
+        EXPECT_LT((k - kt).norm(), 1e-10 * k.norm()) << name << ": the tangent is not symmetric";
     }
 }
 
@@ -206,51 +176,67 @@ TEST(MechanicsImplicit, CorotationalLawIsRotationInvariantAndLinearForSmallStrai
     }
 }
 
-TEST(MechanicsImplicit, CouplingTangentMatchesFiniteDifferences)
-{
-    // Parenchyma with a stiff cubic inclusion, split and coupled by MLS penalties (paper 000).
-    const auto volume = make_volume({6, 6, 6}, [](int i, int j, int k) -> std::uint16_t {
-        return (i >= 2 && i < 4 && j >= 2 && j < 4 && k >= 2 && k < 4) ? 2 : 1;
-    });
+// Parenchyma with a stiff cubic inclusion, split and coupled by MLS penalties (paper 000): the
+// elastic energy with the coupling's, and the coupling alone.
+struct CoupledInclusion {
     TissueTable tissues;
-    tissues.tissues = {{1, "parenchyma", 2e5, 0.49, 1000}, {2, "tumour", 5e6, 0.49, 1000}};
-    const VolumeMesh mesh = mesh_label_volume(volume, tissues, {}, "inclusion").mesh;
-    const SplitMesh split = split_tissue_interfaces(mesh, {{1, TissueGroup::parenchyma}, {2, TissueGroup::tumour}},
-                                                    CouplingStiffness{5e4, 5e4}, {});
-    ASSERT_FALSE(split.coupling.empty());
-    const TledModel model(split.mesh, tissues, {});
-    const StiffnessAssembler assembler(model, &split.coupling);
-    const auto u = random_vector(3 * model.node_count(), 0.05, 5);
-    EXPECT_LT(tangent_error(assembler, u), 1e-6);
-    EXPECT_LT(gradient_error(assembler, u), 1e-6);
-}
+    SplitMesh split;
+    CoupledInclusion()
+    {
+        const auto volume = make_volume({6, 6, 6}, [](int i, int j, int k) -> std::uint16_t {
+            return (i >= 2 && i < 4 && j >= 2 && j < 4 && k >= 2 && k < 4) ? 2 : 1;
+        });
+        tissues.tissues = {{1, "parenchyma", 2e5, 0.49, 1000}, {2, "tumour", 5e6, 0.49, 1000}};
+        const VolumeMesh mesh = mesh_label_volume(volume, tissues, {}, "inclusion").mesh;
+        split = split_tissue_interfaces(mesh, {{1, TissueGroup::parenchyma}, {2, TissueGroup::tumour}}, CouplingStiffness{5e4, 5e4}, {});
+        if (split.coupling.empty()) fail("the inclusion has no coupling");
+    }
+};
+const RegisterFormCase elastic_coupled{"ElasticForm", "hexahedra with a coupled stiff inclusion", [] {
+    const CoupledInclusion c;
+    const TledModel model(c.split.mesh, c.tissues, {});
+    const StiffnessAssembler assembler(model, &c.split.coupling);
+    FiniteDifferenceOptions o;
+    o.random_directions = 3;
+    return FormCheckResult{check_derivatives(ElasticForm(assembler), random_vector(3 * model.node_count(), 0.05, 5), o), 1e-6, 1e-6};
+}};
+const RegisterFormCase coupling_alone{"CouplingForm", "MLS penalty coupling of a stiff inclusion", [] {
+    const CoupledInclusion c;
+    FiniteDifferenceOptions o;
+    o.step = 1e-4; // quadratic: central differences are exact up to round-off
+    return FormCheckResult{check_derivatives(CouplingForm(c.split.coupling), random_vector(3 * c.split.mesh.node_count(), 0.1, 3), o), 1e-8, 1e-8};
+}};
 
-TEST(MechanicsImplicit, ContactTermIsTheGradientAndHessianOfItsEnergy)
+// The augmented-Lagrangian contact of nodes inside a sphere, a cylinder and a plane (with curvature).
+FormCheckResult contact_case(IndenterShape shape)
 {
+    Indenter tool;
+    tool.radius_mm = 2.0;
+    tool.path = {Vec3(0, 0, 0)};
+    tool.shape = shape;
+    if (shape == IndenterShape::cylinder) tool.axis = Vec3(1, 1, 0).normalized();
+    if (shape == IndenterShape::plane) tool.axis = Vec3(0, 0.6, 0.8);
+    // Three nodes inside all three tools, one outside with a multiplier (its pressure still acts), one away.
+    const std::vector<double> rest{0.4, 0.7, -1.5, -0.3, 0.2, -0.9, 0.5, -0.4, -1.2, 0.1, 0.1, -0.05, 0.0, 0.0, 5.0};
+    const ContactForm form(tool, rest, {0, 1, 2, 3, 4}, {0.3, 0.0, 0.1, 0.2, 0.0}, 1.0, 50.0);
+    const std::vector<double> u{0.01, -0.02, 0.03, 0.0, 0.01, 0.0, -0.01, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    FiniteDifferenceOptions o;
+    o.piecewise_smooth = true; // a node on the contact's switch
+    return {check_derivatives(form, u, o), 1e-6, 1e-6, true, 10};
+}
+const RegisterFormCase contact_sphere{"ContactForm", "sphere", [] { return contact_case(IndenterShape::sphere); }};
+const RegisterFormCase contact_cylinder{"ContactForm", "cylinder", [] { return contact_case(IndenterShape::cylinder); }};
+const RegisterFormCase contact_plane{"ContactForm", "plane", [] { return contact_case(IndenterShape::plane); }};
+
+TEST(MechanicsImplicit, ContactTermActsInsideTheToolAndNowhereElse)
+{
+    // Its derivatives are the ContactForm cases of test_forms.cpp.
     Indenter sphere;
     sphere.radius_mm = 2.0;
     sphere.path = {Vec3(0, 0, 0)};
-    Indenter cylinder = sphere;
-    cylinder.shape = IndenterShape::cylinder;
-    cylinder.axis = Vec3(1, 1, 0).normalized();
-    Indenter plane = sphere;
-    plane.shape = IndenterShape::plane;
-    plane.axis = Vec3(0, 0.6, 0.8);
-    const Vec3 x(0.4, 0.7, -1.5); // inside all three tools
-    for (const Indenter* tool : {&sphere, &cylinder, &plane}) {
-        const double lambda = 0.3, eps = 50.0;
-        const ContactTerm t = contact_term(*tool, x, 1.0, lambda, eps);
-        ASSERT_GT(t.pressure_n, 0.0);
-        EXPECT_LT(t.gap_mm, 0.0);
-        const double h = 1e-6;
-        for (int d = 0; d < 3; ++d) {
-            const Vec3 e = Vec3::Unit(d) * h;
-            const ContactTerm p = contact_term(*tool, x + e, 1.0, lambda, eps), m = contact_term(*tool, x - e, 1.0, lambda, eps);
-            EXPECT_NEAR((p.energy_mj - m.energy_mj) / (2 * h), t.gradient[d], 1e-6 * t.gradient.norm());
-            const Vec3 column = (p.gradient - m.gradient) / (2 * h);
-            EXPECT_LT((column - t.hessian.col(d)).norm(), 1e-6 * t.hessian.norm());
-        }
-    }
+    const ContactTerm inside = contact_term(sphere, Vec3(0.4, 0.7, -1.5), 1.0, 0.3, 50.0);
+    EXPECT_GT(inside.pressure_n, 0.0);
+    EXPECT_LT(inside.gap_mm, 0.0);
     // Outside the tool with no multiplier: nothing.
     const ContactTerm away = contact_term(sphere, Vec3(0, 0, 5), 1.0, 0.0, 50.0);
     EXPECT_EQ(away.pressure_n, 0.0);

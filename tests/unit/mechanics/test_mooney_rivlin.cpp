@@ -1,9 +1,12 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 // The ground truth's law: compressible Mooney–Rivlin. Its stress is the derivative of its energy,
-// its automatic-differentiation tangent the derivative of its stress (finite differences), it
+// its automatic-differentiation tangent the derivative of its stress (finite differences, as a Form), it
 // reduces to our Neo-Hookean law for C01 = 0, and on a CGAL-meshed gel block with an inclusion
 // physreg's Newton matches CalculiX's C3D4 MOONEY-RIVLIN (skips without ccx).
+#include "form_cases.hpp"
 #include "mechanics_fixtures.hpp"
+#include "physreg/core/error.hpp"
+#include "physreg/mechanics/forms/mechanics_forms.hpp"
 #include "physreg/mechanics/simulation/calculix.hpp"
 #include "physreg/mechanics/implicit/newton_solver.hpp"
 #include "physreg/phantom/dataset.hpp"
@@ -24,42 +27,22 @@ ElasticMaterial mooney(double c01_fraction)
     return material_from_tissue(t);
 }
 
-double energy(const ElasticMaterial& m, const double* f)
-{
-    double p[9];
-    return mooney_rivlin_stress<double>(0.5 * m.mu_mpa - m.c01_mpa, m.c01_mpa, m.kappa_mpa, f, p);
-}
-
 const double kF[9] = {1.12, 0.07, -0.05, -0.03, 0.91, 0.11, 0.06, -0.08, 1.04}; // a finite, non-symmetric F
 
 } // namespace
 
-TEST(MooneyRivlin, StressIsTheEnergyDerivativeAndTheTangentTheStressDerivative)
+// Its stress is ∂Ψ/∂F and its automatic-differentiation tangent ∂P/∂F: a Form of F (test_forms.cpp).
+const test::RegisterFormCase mooney_rivlin_law{"StrainEnergyDensityForm", "Mooney-Rivlin, C01 = 0.35 of mu/2", [] {
+    const ElasticMaterial m = mooney(0.35);
+    if (!(m.c01_mpa > 0.0)) fail("the Mooney-Rivlin material has no second-invariant term");
+    FiniteDifferenceOptions o;
+    o.random_directions = 3;
+    return test::FormCheckResult{check_derivatives(StrainEnergyDensityForm(MaterialLaw::mooney_rivlin, m), std::vector<double>(kF, kF + 9), o), 1e-7, 1e-6};
+}};
+
+TEST(MooneyRivlin, UndeformedItHasNoStressAndTheSmallStrainTangent)
 {
     const ElasticMaterial m = mooney(0.35);
-    ASSERT_GT(m.c01_mpa, 0.0);
-    double p[9], a[81];
-    mooney_rivlin_stress<double>(0.5 * m.mu_mpa - m.c01_mpa, m.c01_mpa, m.kappa_mpa, kF, p);
-    first_piola_tangent(MaterialLaw::mooney_rivlin, m, kF, a);
-    const double h = 1e-6;
-    double worst_p = 0, worst_a = 0, scale_p = 0, scale_a = 0;
-    for (int k = 0; k < 9; ++k) {
-        double fp[9], fm[9], pp[9], pm[9];
-        std::copy(kF, kF + 9, fp);
-        std::copy(kF, kF + 9, fm);
-        fp[k] += h;
-        fm[k] -= h;
-        worst_p = std::max(worst_p, std::abs((energy(m, fp) - energy(m, fm)) / (2 * h) - p[k]));
-        scale_p = std::max(scale_p, std::abs(p[k]));
-        mooney_rivlin_stress<double>(0.5 * m.mu_mpa - m.c01_mpa, m.c01_mpa, m.kappa_mpa, fp, pp);
-        mooney_rivlin_stress<double>(0.5 * m.mu_mpa - m.c01_mpa, m.c01_mpa, m.kappa_mpa, fm, pm);
-        for (int r = 0; r < 9; ++r) {
-            worst_a = std::max(worst_a, std::abs((pp[r] - pm[r]) / (2 * h) - a[9 * r + k]));
-            scale_a = std::max(scale_a, std::abs(a[9 * r + k]));
-        }
-    }
-    EXPECT_LT(worst_p, 1e-7 * scale_p);
-    EXPECT_LT(worst_a, 1e-6 * scale_a);
     // Undeformed: no stress, and the small-strain tangent (λ + 2μ on the diagonal).
     const double identity[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
     double p0[9], a0[81];

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 // Paper 002's pieces: per-structure linear elasticity, signed distance maps, the adjoint gradient
 // against finite differences, conforming multi-structure meshes, and the F/E alternation.
+#include "form_cases.hpp"
+#include "physreg/registration/images/segmentation_forms.hpp"
 #include "test_support.hpp"
 
 #include "physreg/core/error.hpp"
@@ -327,26 +329,35 @@ TEST(SegmentationObjective, ReverseTermSeesWhatNoModelNodeReachesWithAnExactGrad
     }
     EXPECT_GT(mesh.nodes[static_cast<std::size_t>(strongest)].x(), 26.0);
     EXPECT_LT(reverse[3 * strongest], -0.5 * largest); // −∂Ψ/∂u_x > 0: toward the rod
-    // The gradient of the symmetric objective against central differences, along random directions
-    // (piecewise smooth: a difference counts only where the half step agrees, as in AdjointGradient).
+    // Its gradient against central differences: the "symmetric objective" Form case below.
+}
+
+// The symmetric objective of the cube-and-rod pair at a random displacement, as a Form checked by
+// test_forms.cpp (piecewise smooth: a difference counts only where the half step agrees).
+const test::RegisterFormCase symmetric_objective{"SegmentationObjectiveForm", "symmetric, cube and rod", [] {
+    const auto cube = [](int i, int j, int k) { return i >= 4 && i < 28 && j >= 4 && j < 28 && k >= 4 && k < 28; };
+    const LabelVolume moving = test::make_volume({44, 32, 32}, [&](int i, int j, int k) -> std::uint16_t { return cube(i, j, k) ? 1 : 0; });
+    const LabelVolume fixed = test::make_volume({44, 32, 32}, [&](int i, int j, int k) -> std::uint16_t {
+        return cube(i, j, k) || (i >= 28 && i < 38 && j >= 15 && j < 17 && k >= 15 && k < 17) ? 1 : 0;
+    });
+    const VolumeMesh mesh = mesh_of(moving, 4.0);
+    const SignedDistanceMap map(fixed, {1}, "fixed cube and rod");
+    SegmentationObjective symmetric(mesh, {1}, {&map}, "symmetric");
+    symmetric.add_reverse_term();
     std::mt19937 random(5);
     std::normal_distribution<double> normal(0.0, 0.3);
+    std::vector<double> u(3 * mesh.node_count());
     for (auto& v : u) v = normal(random);
-    Eigen::VectorXd g;
-    symmetric.evaluate(u, &g);
-    int counted = 0;
-    for (int trial = 0; trial < 8; ++trial) {
-        Eigen::VectorXd v(u.size());
-        for (auto& e : v) e = normal(random);
-        const auto along = [&](double t) { return symmetric.evaluate(u + t * v, nullptr); };
-        const double h = 1e-5; // Φ ≈ 10² mm²: round-off limits a smaller step
-        const double full = (along(h) - along(-h)) / (2 * h), half = (along(h / 2) - along(-h / 2)) / h;
-        if (std::abs(full - half) > 1e-6 * std::abs(half)) continue;
-        ++counted;
-        EXPECT_NEAR(g.dot(v), half, 1e-5 * std::abs(half)) << "direction " << trial;
-    }
-    EXPECT_GE(counted, 3);
-}
+    FiniteDifferenceOptions o;
+    o.coordinate_directions = 0;
+    o.random_directions = 8;
+    o.step = 1e-5; // Φ ≈ 10² mm²: round-off limits a smaller step
+    o.piecewise_smooth = true;
+    test::FormCheckResult out{check_derivatives(SegmentationObjectiveForm(symmetric, mesh.node_count()), u, o), 1e-6};
+    out.expect_hessian = false;
+    out.min_directions = 3;
+    return out;
+}};
 
 struct Problem {
     LabelVolume moving, reference;
@@ -395,78 +406,76 @@ void build_problem(Problem& p, double inclusion_ratio)
     p.clamped = std::make_unique<LinearElasticModel>(p.mesh, o, "clamped model");
 }
 
-class AdjointGradient : public ::testing::TestWithParam<BoundaryParametrisation> {};
-
-TEST_P(AdjointGradient, EqualsCentralFiniteDifferences)
+// Φ is only piecewise smooth: the trilinear distance maps' gradients jump on voxel-cell faces,
+// and a boundary node that crosses one inside ±h makes a central difference straddle a kink
+// (where that happens depends on the exact mesh, i.e. on the build — one build's point sat on a
+// kink in every direction). A difference counts only where it agrees with the one at half the
+// step, and random points are drawn until enough have counted.
+test::FormCheckResult boundary_case(BoundaryParametrisation mode)
 {
     Problem p;
     build_problem(p, 4.0);
-    const BoundaryParametrisation mode = GetParam();
     LinearElasticModel& model = mode == BoundaryParametrisation::nodal_forces ? *p.model : *p.clamped;
-    const std::vector<double> moduli{2500.0, 6000.0};
-    model.set_young_moduli(moduli);
+    model.set_young_moduli({2500.0, 6000.0});
+    const SegmentationBoundaryForm form(model, *p.objective, p.force_nodes, mode, model.mean_diagonal_n_mm());
     std::mt19937 random(11);
     std::normal_distribution<double> normal(0.0, 1.0);
-    const double scale = model.mean_diagonal_n_mm();
-    // Φ is only piecewise smooth: the trilinear distance maps' gradients jump on voxel-cell faces,
-    // and a boundary node that crosses one inside ±h makes a central difference straddle a kink
-    // (where that happens depends on the exact mesh, i.e. on the build — one build's point sat
-    // on a kink in every direction). A difference counts only where it agrees with the one at
-    // half the step — no kink inside — and every one that counts must match the adjoint; random
-    // points are drawn until enough have counted.
-    const auto smooth_difference = [](const auto& along, double h, double agreement, double& fd) {
-        const double full = (along(h) - along(-h)) / (2 * h);
-        const double half = (along(h / 2) - along(-h / 2)) / h;
-        fd = half;
-        return std::abs(full - half) <= agreement * std::abs(half);
-    };
-    int directions = 0;
-    std::vector<int> modulus_checks(2, 0);
-    for (int point = 0; point < 4 && (directions < 3 || modulus_checks[0] == 0 || modulus_checks[1] == 0); ++point) {
-        model.set_young_moduli(moduli);
-        Eigen::VectorXd x(3 * static_cast<Eigen::Index>(p.force_nodes.size()));
+    FiniteDifferenceOptions o;
+    o.coordinate_directions = 0;
+    o.random_directions = 4;
+    o.piecewise_smooth = true;
+    o.smoothness_agreement = 1e-7;
+    o.step = 1e-5; // along unit directions over a few hundred unknowns (smaller steps meet round-off)
+    test::FormCheckResult out{{}, 1e-6};
+    for (std::uint32_t point = 0; point < 4 && out.check.directions < 3; ++point) {
+        std::vector<double> x(form.size());
         for (auto& v : x) v = (mode == BoundaryParametrisation::nodal_forces ? 0.02 : 0.5) * normal(random);
-        const auto phi = [&](const Eigen::VectorXd& at) {
-            return evaluate_segmentation_gradient(model, *p.objective, p.force_nodes, mode, scale, at).objective_mm2;
-        };
-        const SegmentationGradient g = evaluate_segmentation_gradient(model, *p.objective, p.force_nodes, mode, scale, x);
-        ASSERT_GT(g.objective_mm2, 0.0);
-        // Directional derivatives along random boundary directions.
-        for (int trial = 0; trial < 4; ++trial) {
-            Eigen::VectorXd v(x.size());
-            for (auto& e : v) e = normal(random);
-            double fd = 0.0;
-            if (!smooth_difference([&](double t) { return phi(x + t * v); }, 1e-6, 1e-7, fd)) continue;
-            ++directions;
-            EXPECT_NEAR(g.d_force.dot(v), fd, 1e-5 * std::abs(fd)) << "point " << point << ", boundary direction " << trial;
-        }
-        // Each log-modulus (all nodes move; the re-factorised solve's round-off is ≈ 1e-12 Φ, so
-        // the steps are larger).
-        for (std::size_t j = 0; j < 2; ++j) {
-            const auto along = [&](double t) {
-                std::vector<double> e = moduli;
-                e[j] *= std::exp(t);
-                model.set_young_moduli(e);
-                return phi(x);
-            };
-            for (double h : {1e-4, 3e-5, 1e-5}) {
-                double fd = 0.0;
-                if (!smooth_difference(along, h, 2e-6, fd)) continue;
-                ++modulus_checks[j];
-                EXPECT_NEAR(g.d_log_modulus[j], fd, 1e-5 * std::abs(fd)) << "point " << point << ", modulus " << j;
-                EXPECT_GT(std::abs(fd), 1e-6 * g.objective_mm2);
-                break;
-            }
-        }
+        o.seed = point + 1;
+        const FiniteDifferenceCheck check = check_derivatives(form, x, o);
+        out.check = point == 0 ? check : test::merged(out.check, check);
     }
-    EXPECT_GE(directions, 3) << "too few random directions free of voxel-cell faces within ±1e-6";
-    EXPECT_GE(modulus_checks[0], 1);
-    EXPECT_GE(modulus_checks[1], 1);
+    out.expect_hessian = false;
+    out.min_directions = 3;
+    return out;
 }
 
-INSTANTIATE_TEST_SUITE_P(SegmentationRegistration, AdjointGradient,
-                         ::testing::Values(BoundaryParametrisation::nodal_forces, BoundaryParametrisation::surface_displacement),
-                         [](const auto& info) { return info.param == BoundaryParametrisation::nodal_forces ? "nodal_forces" : "surface_displacement"; });
+// Each log-modulus (all nodes move; the re-factorised solve's round-off is ≈ 1e-12 Φ, so the step is larger).
+test::FormCheckResult modulus_case(BoundaryParametrisation mode)
+{
+    Problem p;
+    build_problem(p, 4.0);
+    LinearElasticModel& model = mode == BoundaryParametrisation::nodal_forces ? *p.model : *p.clamped;
+    std::mt19937 random(11);
+    std::normal_distribution<double> normal(0.0, 1.0);
+    FiniteDifferenceOptions o;
+    o.random_directions = 2;
+    o.piecewise_smooth = true;
+    o.smoothness_agreement = 2e-6;
+    test::FormCheckResult out;
+    for (std::uint32_t point = 0; point < 4; ++point) {
+        Eigen::VectorXd x(3 * static_cast<Eigen::Index>(p.force_nodes.size()));
+        for (auto& v : x) v = (mode == BoundaryParametrisation::nodal_forces ? 0.02 : 0.5) * normal(random);
+        model.set_young_moduli({2500.0, 6000.0});
+        const SegmentationModulusForm form(model, *p.objective, p.force_nodes, mode, model.mean_diagonal_n_mm(), x, {2500.0, 6000.0});
+        for (double h : {1e-4, 3e-5, 1e-5}) {
+            o.step = h;
+            out = {check_derivatives(form, std::vector<double>(2, 0.0), o), 1e-5};
+            if (out.check.directions >= 3) break;
+        }
+        if (out.check.directions >= 3) break;
+    }
+    out.expect_hessian = false;
+    out.min_directions = 3;
+    return out;
+}
+
+const test::RegisterFormCase boundary_forces{"SegmentationBoundaryForm", "nodal forces", [] { return boundary_case(BoundaryParametrisation::nodal_forces); }};
+const test::RegisterFormCase boundary_displacements{"SegmentationBoundaryForm", "surface displacements",
+                                                    [] { return boundary_case(BoundaryParametrisation::surface_displacement); }};
+const test::RegisterFormCase moduli_forces{"SegmentationModulusForm", "log-moduli under nodal forces",
+                                           [] { return modulus_case(BoundaryParametrisation::nodal_forces); }};
+const test::RegisterFormCase moduli_displacements{"SegmentationModulusForm", "log-moduli under surface displacements",
+                                                  [] { return modulus_case(BoundaryParametrisation::surface_displacement); }};
 
 // Issue 28's large-deformation lever: co-rotational elasticity with frozen rotations. A rigid
 // rotation costs nothing (the small-strain law resists it), and the adjoint gradient in the moduli

@@ -8,6 +8,8 @@
 #include "physreg/registration/surface/surface_adjoint.hpp"
 #include "physreg/registration/surface/surface_model.hpp"
 #include "physreg/registration/surface/surface_registration.hpp"
+#include "form_cases.hpp"
+#include "physreg/registration/surface/surface_forms.hpp"
 #include "test_support.hpp"
 
 #include <gtest/gtest.h>
@@ -278,54 +280,96 @@ TEST(SurfaceRegistration, RobustRigidRefusesAPoseThatTearsTheSupportsAway)
         }
 }
 
-TEST(SurfaceRegistration, AdjointGradientEqualsFiniteDifferences)
+// Issue 32 item 2: J(f) = ½ mean (n·(x(u) − q))² + α ½ uᵀKu with u = K⁻¹ f; its gradient from one
+// adjoint solve is a Form checked against central differences (test_forms.cpp), held at the
+// posterior nodes and free (soft springs), linearised at rest and, for the co-rotational
+// re-linearisation, at a 6° turn plus a 3 % stretch of the free nodes (held ones stay at rest).
+test::FormCheckResult adjoint_case(int variant)
 {
-    // Issue 32 item 2: J(f) = ½ mean (n·(x(u) − q))² + α ½ uᵀKu with u = K⁻¹ f; its gradient from one
-    // adjoint solve against central differences, held at the posterior nodes and free (soft springs).
     const SurfaceModel& model = ellipsoid_model();
     const LabelledPointCloud cloud = anterior_cloud(model, [](const Vec3& p) { return Vec3(p + Vec3(0.5, -2.0, 1.0) + 0.02 * (p - Vec3(36, 24, 19.5))); });
     const LabelledTriangles surface = unlabelled_boundary(model.mesh);
     const SurfaceMatcher matcher(surface, model.mesh.node_count(), "ellipsoid");
-    // Linearised at rest (held, free) and, for the co-rotational re-linearisation, at a 6° turn plus
-    // a 3 % stretch of the free nodes (held ones stay at rest).
-    for (const int variant : {0, 1, 2}) {
-        const bool held = variant != 1;
-        AdjointSurfaceOptions options;
-        options.matching.distance_fraction = 1.0;
-        if (held) options.fixed_nodes = surface_nodes_facing(model.mesh, surface, Vec3::UnitY(), 0.5);
-        std::vector<double> at(3 * model.mesh.node_count(), 0.0);
-        if (variant == 2) {
-            std::vector<std::uint8_t> fixed(model.mesh.node_count(), 0);
-            for (const auto n : options.fixed_nodes) fixed[static_cast<std::size_t>(n)] = 1;
-            const Mat3 turn = Eigen::AngleAxisd(6.0 * std::numbers::pi / 180, Vec3(0, 0, 1)).toRotationMatrix();
-            for (std::size_t n = 0; n < model.mesh.node_count(); ++n) {
-                if (fixed[n]) continue;
-                const Vec3 x = model.mesh.nodes[n] - Vec3(36, 24, 19.5);
-                const Vec3 d = turn * (1.03 * x) - x;
-                for (int k = 0; k < 3; ++k) at[3 * n + static_cast<std::size_t>(k)] = d[k];
-            }
+    const bool held = variant != 1;
+    AdjointSurfaceOptions options;
+    options.matching.distance_fraction = 1.0;
+    if (held) options.fixed_nodes = surface_nodes_facing(model.mesh, surface, Vec3::UnitY(), 0.5);
+    std::vector<double> at(3 * model.mesh.node_count(), 0.0);
+    if (variant == 2) {
+        std::vector<std::uint8_t> fixed(model.mesh.node_count(), 0);
+        for (const auto n : options.fixed_nodes) fixed[static_cast<std::size_t>(n)] = 1;
+        const Mat3 turn = Eigen::AngleAxisd(6.0 * std::numbers::pi / 180, Vec3(0, 0, 1)).toRotationMatrix();
+        for (std::size_t n = 0; n < model.mesh.node_count(); ++n) {
+            if (fixed[n]) continue;
+            const Vec3 x = model.mesh.nodes[n] - Vec3(36, 24, 19.5);
+            const Vec3 d = turn * (1.03 * x) - x;
+            for (int k = 0; k < 3; ++k) at[3 * n + static_cast<std::size_t>(k)] = d[k];
         }
-        const std::vector<double>* point = variant == 2 ? &at : nullptr;
-        std::mt19937 random(5);
-        std::normal_distribution<double> normal(0.0, 1e-3);
-        std::vector<double> f(3 * model.mesh.node_count()), gradient;
-        for (auto& v : f) v = normal(random);
-        const double alpha = 0.3;
-        adjoint_surface_objective(model.mesh, matcher, cloud, options, alpha, f, gradient, point);
-        double norm = 0.0;
-        for (double g : gradient) norm += g * g;
-        ASSERT_GT(norm, 0.0);
-        for (int trial = 0; trial < 3; ++trial) {
-            std::vector<double> d(f.size()), plus = f, minus = f, unused;
-            for (std::size_t i = 0; i < d.size(); ++i) d[i] = gradient[i] != 0.0 ? normal(random) : 0.0; // the unknowns: free surface dofs
-            const double h = 1e-4;
-            for (std::size_t i = 0; i < d.size(); ++i) plus[i] += h * d[i], minus[i] -= h * d[i];
-            const double fd = (adjoint_surface_objective(model.mesh, matcher, cloud, options, alpha, plus, unused, point) -
-                               adjoint_surface_objective(model.mesh, matcher, cloud, options, alpha, minus, unused, point)) / (2 * h);
-            double exact = 0.0;
-            for (std::size_t i = 0; i < d.size(); ++i) exact += gradient[i] * d[i];
-            EXPECT_NEAR(fd, exact, 1e-5 * std::abs(exact) + 1e-12) << "variant " << variant << ", direction " << trial;
-        }
+    }
+    const SurfaceAdjointForm form(model.mesh, matcher, cloud, options, 0.3, variant == 2 ? &at : nullptr);
+    std::mt19937 random(5);
+    std::normal_distribution<double> normal(0.0, 1e-3);
+    std::vector<double> f(3 * model.mesh.node_count()), gradient(f.size());
+    for (auto& v : f) v = normal(random);
+    // The unknowns are the free surface dofs: where the gradient is not identically zero.
+    form.gradient(f, gradient);
+    FiniteDifferenceOptions o;
+    for (std::size_t i = 0; i < gradient.size(); ++i)
+        if (gradient[i] != 0.0) o.variables.push_back(i);
+    o.coordinate_directions = 2;
+    o.random_directions = 3;
+    o.step = 3e-6; // N, against forces of ≈ 1e-3 N per dof
+    test::FormCheckResult out{check_derivatives(form, f, o), 1e-5};
+    out.expect_hessian = false; // first order: its gradient costs one adjoint solve
+    return out;
+}
+const test::RegisterFormCase adjoint_held{"SurfaceAdjointForm", "held at the posterior nodes", [] { return adjoint_case(0); }};
+const test::RegisterFormCase adjoint_free{"SurfaceAdjointForm", "free on soft springs", [] { return adjoint_case(1); }};
+const test::RegisterFormCase adjoint_turned{"SurfaceAdjointForm", "re-linearised after a turn and a stretch", [] { return adjoint_case(2); }};
+
+// The arctan pair forces are −∇ of the pair potential: pairs of the anterior cloud, shifted, at a
+// displaced state (the sources move with u).
+const test::RegisterFormCase pair_potential{"PairPotentialForm", "pairs of an anterior patch on the ellipsoid", [] {
+    const SurfaceModel& model = ellipsoid_model();
+    const LabelledPointCloud cloud = anterior_cloud(model, [](const Vec3& p) { return Vec3(p + Vec3(0.5, -2.0, 1.0)); });
+    const LabelledTriangles surface = unlabelled_boundary(model.mesh);
+    const std::vector<double> rest = positions(model.mesh);
+    const SurfaceMatcher matcher(surface, model.mesh.node_count(), "ellipsoid");
+    MatchingOptions matching;
+    matching.distance_fraction = 1.0;
+    std::map<std::int32_t, double> k;
+    for (auto label : matcher.labels()) k[label] = 0.02;
+    const PairPotentialForm form(matcher.match(rest, cloud, matching), surface, k, ArctanForceLaw{3.0}, rest);
+    std::vector<double> u(rest.size());
+    for (std::size_t i = 0; i < u.size(); ++i) u[i] = 0.3 * std::sin(0.91 * static_cast<double>(i));
+    return test::FormCheckResult{check_derivatives(form, u), 1e-7, 1e-6};
+}};
+
+TEST(SurfaceMatching, PairForcesAreMinusThePotentialsGradientAndTheirBoundCoversItsHessian)
+{
+    // What the integrator adds (accumulate_pair_forces) is −∇ Σ ψ at the state the pairs were made at.
+    const SurfaceModel& model = ellipsoid_model();
+    const LabelledPointCloud cloud = anterior_cloud(model, [](const Vec3& p) { return Vec3(p + Vec3(0.5, -2.0, 1.0)); });
+    const LabelledTriangles surface = unlabelled_boundary(model.mesh);
+    const std::vector<double> rest = positions(model.mesh);
+    const SurfaceMatcher matcher(surface, model.mesh.node_count(), "ellipsoid");
+    const auto pairs = matcher.match(rest, cloud, MatchingOptions{});
+    ASSERT_GT(pairs.size(), 10u);
+    std::map<std::int32_t, double> k;
+    for (auto label : matcher.labels()) k[label] = 0.02;
+    const ArctanForceLaw law{3.0};
+    std::vector<double> forces(rest.size(), 0.0), gradient(rest.size());
+    accumulate_pair_forces(pairs, surface, k, law, forces, nullptr);
+    PairPotentialForm(pairs, surface, k, law, rest).gradient(std::vector<double>(rest.size(), 0.0), gradient);
+    double largest = 0.0, worst = 0.0;
+    for (std::size_t i = 0; i < forces.size(); ++i) largest = std::max(largest, std::abs(forces[i])), worst = std::max(worst, std::abs(forces[i] + gradient[i]));
+    ASSERT_GT(largest, 1e-4);
+    EXPECT_LT(worst, 1e-12 * largest);
+    // The lumped bound is the tangential stiffness ψ'/d, never below the radial ψ'': the largest eigenvalue.
+    for (double d : {0.0, 0.5, 3.0, 20.0}) {
+        const double tangential = d > 0 ? law.magnitude(1.0, d) / d : law.radial_stiffness(1.0, 0.0);
+        EXPECT_NEAR(law.stiffness_bound(1.0, d), tangential, 1e-12);
+        EXPECT_GE(law.stiffness_bound(1.0, d), law.radial_stiffness(1.0, d) - 1e-15);
     }
 }
 

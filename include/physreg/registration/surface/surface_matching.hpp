@@ -78,6 +78,11 @@ struct ArctanForceLaw {
     double d90_mm = 5.0; ///< distance at which the force reaches 90 % of k
     double sigma_per_mm() const;
     double magnitude(double stiffness_n, double distance_mm) const;
+    /// The potential whose derivative in d is the magnitude: ψ(d) = k (2/π) (d arctan(σd) − ln(1 + σ²d²) / (2σ)),
+    /// mJ; the pairs' forces are −∇ of Σ ψ (PairPotentialForm).
+    double potential(double stiffness_n, double distance_mm) const;
+    /// ψ''(d) = k (2/π) σ / (1 + σ²d²), N/mm: the force's stiffness along the pair.
+    double radial_stiffness(double stiffness_n, double distance_mm) const;
     /// An upper bound of the force's stiffness (N/mm) in any direction at this distance: k (2/π) arctan(σd)/d
     /// (→ k (2/π) σ at d = 0), used in the implicit integrator's Jacobian.
     double stiffness_bound(double stiffness_n, double distance_mm) const;
