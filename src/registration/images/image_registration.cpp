@@ -371,58 +371,27 @@ void validate(const ImageRegistrationSettings& s, SettingNaming naming)
     }
 }
 
-ImageRegistrationResult register_images(const ImagePair& original, const ImageRegistrationSettings& settings,
-                                        const std::function<void(double, const std::string&)>& progress)
+
+namespace {
+
+/// The moving structures' model: the mesh (kept in result.mesh) with its held nodes (result.held),
+/// the loaded surface nodes, each structure's reference map and initial modulus, and the objective.
+struct ImageModel {
+    TetrahedronQuality quality;
+    double meshing_s = 0.0;
+    LinearElasticOptions elastic;
+    std::vector<std::int32_t> force_nodes;
+    std::vector<std::int32_t> labels; ///< the model's structures, sorted; held labels take part in the mechanics only
+    std::vector<std::unique_ptr<SignedDistanceMap>> maps, moving_maps;
+    std::vector<const SignedDistanceMap*> map_of; ///< per label: its reference map, null for held labels
+    std::vector<double> initial_e;
+    std::unique_ptr<SegmentationObjective> objective;
+};
+
+ImageModel build_image_model(const ImagePair& in, const LabelVolume& fixed_labels, const std::vector<std::int32_t>& structures, const TissueTable& tissues,
+                             const ImageRegistrationSettings& s, ImageRegistrationResult& result)
 {
-    const auto start = std::chrono::steady_clock::now();
-    const auto report = [&](double f, const std::string& m) {
-        if (progress) progress(f, m);
-    };
-    validate(settings, SettingNaming::option);
-    const auto same = [](const ImageGeometry& a, const ImageGeometry& b) { return a.size == b.size && (a.origin - b.origin).norm() < 1e-6 && (a.spacing - b.spacing).norm() < 1e-9; };
-    if (!same(original.fixed.geometry, original.fixed_labels.geometry)) fail("register-images: the fixed image and --fixed-labels are on different grids");
-    if (!same(original.moving.geometry, original.moving_labels.geometry)) fail("register-images: the moving image and --moving-labels are on different grids");
-    if (original.landmarks_fixed.has_value() != original.landmarks_moving.has_value())
-        fail("register-images: give both --landmarks-fixed and --landmarks-moving, or neither");
-
-    ImageRegistrationResult result;
-    result.settings = settings;
-    result.settings.hold = settings.hold == "auto" ? original.auto_hold : settings.hold;
-    const ImageRegistrationSettings& s = result.settings;
-    if (s.hold != "posterior" && s.hold != "none") fail("--hold '{}': use posterior, none or auto", s.hold);
-
-    // 1. Structures and tissues.
-    result.structures = resolve_structures(original, settings.structures);
-    const std::vector<std::int32_t>& structures = result.structures;
-    const TissueTable tissues = resolve_tissues(original, structures);
-
-    // 2. Initial alignment.
-    report(0.01, "initial alignment");
-    const InitialAlignment initial_mode = parse_initial_alignment(s.initial);
-    result.alignment = align_segmentations(original.fixed_labels, original.moving_labels, structures, initial_mode, s.initial_max_rotation);
-    const SegmentationAlignment& alignment = result.alignment;
-    if (initial_mode != InitialAlignment::identity)
-        logger()->info("register-images: initial alignment ({}, start {}): rotation {:.2f}°, translation ({:.1f}, {:.1f}, {:.1f}) mm; structures' boundary RMS "
-                       "distance {:.2f} → {:.2f} mm", s.initial, alignment.start, alignment.rotation_deg, alignment.translation[0], alignment.translation[1],
-                       alignment.translation[2], alignment.rms_boundary_distance_before_mm, alignment.rms_boundary_distance_mm);
-    if (initial_mode == InitialAlignment::rigid) {
-        logger()->info("register-images: initial alignment: {}", alignment.decision);
-        if (!alignment.runner_up.empty())
-            logger()->info("register-images: initial alignment: runner-up {} ({:.1f}° from the winner), {:+.2f} mm RMS boundary distance",
-                           alignment.runner_up, alignment.runner_up_rotation_deg, alignment.runner_up_margin_mm);
-    }
-    std::tie(result.aligned, result.alignment_decision) = alignment_decision(alignment, s);
-    if (initial_mode != InitialAlignment::identity) logger()->info("register-images: initial alignment {}", result.alignment_decision);
-    const ImagePair in = result.aligned ? aligned_pair(original, alignment) : original;
-    if (!result.aligned) require_overlap(in);
-
-    // 3. Region, mesh, supports.
-    result.region = region_of_interest(in, structures, s.margin);
-    const ImageGeometry& roi = result.region;
-    const ScalarImage fixed = crop<ScalarImage>(in.fixed, roi, in.fixed.values);
-    const LabelVolume fixed_labels = crop<LabelVolume>(in.fixed_labels, roi, in.fixed_labels.labels);
-    logger()->info("register-images: structures {}, region {}×{}×{} voxels", fmt::join(structures, ","), roi.size[0], roi.size[1], roi.size[2]);
-    report(0.02, "meshing");
+    ImageModel m;
     const auto t_mesh = std::chrono::steady_clock::now();
     TetMeshingOptions meshing;
     meshing.labels.insert(structures.begin(), structures.end());
@@ -434,23 +403,24 @@ ImageRegistrationResult register_images(const ImagePair& original, const ImageRe
     meshing.seed_every_component = true; // every organ piece must be meshed, or its Dice collapses
     result.mesh = mesh_labels_tetrahedral(in.moving_labels, meshing, "the moving segmentation");
     const VolumeMesh& mesh = result.mesh;
-    const TetrahedronQuality quality = measure_tetrahedra(mesh);
-    const double mesh_s = seconds_since(t_mesh);
-    LinearElasticOptions elastic;
+    m.quality = measure_tetrahedra(mesh);
+    m.meshing_s = seconds_since(t_mesh);
+    LinearElasticOptions& elastic = m.elastic;
     for (const auto& t : tissues.tissues) elastic.poisson_ratio[t.label] = t.poisson_ratio;
     elastic.anchor_stiffness_n_mm = s.anchor;
     result.held = held_nodes(mesh, s.hold_labels, s.hold);
     for (std::size_t n = 0; n < result.held.size(); ++n)
         if (result.held[n]) elastic.fixed_nodes.push_back(static_cast<std::int32_t>(n));
-    std::vector<std::int32_t> force_nodes;
+    std::vector<std::int32_t>& force_nodes = m.force_nodes;
     for (auto n : outer_boundary_nodes(mesh))
         if (!result.held[static_cast<std::size_t>(n)]) force_nodes.push_back(n);
     // Structures of the model (sorted labels), their maps and initial moduli; held labels take part
     // in the mechanics but not in the objective.
-    const std::vector<std::int32_t> model_labels(meshing.labels.begin(), meshing.labels.end());
-    std::vector<std::unique_ptr<SignedDistanceMap>> maps;
-    std::vector<const SignedDistanceMap*> map_of;
-    std::vector<double> initial_e;
+    m.labels.assign(meshing.labels.begin(), meshing.labels.end());
+    const std::vector<std::int32_t>& model_labels = m.labels;
+    auto& maps = m.maps;
+    auto& map_of = m.map_of;
+    auto& initial_e = m.initial_e;
     for (auto label : model_labels) {
         const bool structure = std::count(structures.begin(), structures.end(), label) > 0;
         maps.push_back(structure ? std::make_unique<SignedDistanceMap>(fixed_labels, std::set<std::int32_t>{label}, "fixed label " + std::to_string(label)) : nullptr);
@@ -464,9 +434,10 @@ ImageRegistrationResult register_images(const ImagePair& original, const ImageRe
         for (auto label : model_labels)
             if (!meshed.count(label)) fail("register-images: structure {} got no tetrahedron (thinner than --cell-size {} mm?)", label, s.cell_size);
     }
-    SegmentationObjective objective(mesh, model_labels, map_of, "the fixed segmentation");
+    m.objective = std::make_unique<SegmentationObjective>(mesh, model_labels, map_of, "the fixed segmentation");
+    SegmentationObjective& objective = *m.objective;
     if (s.symmetric) objective.add_reverse_term();
-    std::vector<std::unique_ptr<SignedDistanceMap>> moving_maps;
+    auto& moving_maps = m.moving_maps;
     if (s.rest_offsets) {
         std::vector<const SignedDistanceMap*> moving_of;
         for (std::size_t j = 0; j < model_labels.size(); ++j) {
@@ -482,15 +453,15 @@ ImageRegistrationResult register_images(const ImagePair& original, const ImageRe
     logger()->info("register-images: {} tetrahedra, {} nodes, {} held, {} loaded surface nodes, {} objective terms", mesh.cell_count(), mesh.node_count(),
                    elastic.fixed_nodes.size(), force_nodes.size(), objective.term_count());
 
-    // 4. The biomechanical registration and its dense inverse field.
-    result.methods.push_back({"at_rest", zero_field(roi), std::nullopt, {}, 0.0, json::object()});
-    report(0.05, "biomechanical registration");
-    const SegmentationRegistrationOptions reg = s.solver_options();
-    result.biomechanical = register_segmentation(mesh, elastic, objective, force_nodes, initial_e, reg, [&](double f, const std::string& m) { report(0.05 + 0.45 * f, m); });
-    const SegmentationRegistrationResult& b = result.biomechanical;
-    if (b.inverted_elements > 0)
-        logger()->warn("register-images: {} of {} tetrahedra are inverted in the biomechanical result (summary.json: model.inverted_elements); the dense field is "
-                       "still written", b.inverted_elements, mesh.cell_count());
+    return m;
+}
+
+/// The biomechanical result as a method: its dense inverse field on the region, the moving labels
+/// warped (voxels the structures left are background), landmarks carried, the solver's figures.
+ImageMethodOutcome biomechanical_outcome(const ImagePair& in, const VolumeMesh& mesh, const std::vector<std::int32_t>& model_labels,
+                                         const SegmentationRegistrationResult& b, const SegmentationRegistrationOptions& reg, const ImageGeometry& roi,
+                                         const ImageRegistrationSettings& s)
+{
     const std::vector<double> u(b.displacement_mm.data(), b.displacement_mm.data() + b.displacement_mm.size());
     {
         const auto t0 = std::chrono::steady_clock::now();
@@ -509,14 +480,18 @@ ImageRegistrationResult register_images(const ImagePair& original, const ImageRe
                      {"cycles", static_cast<int>(b.history.size()) - 1}, {"stop_reason", b.stop_reason},
                      {"time_split_s", {{"factorisation", b.factorisation_s}, {"solves", b.solve_s}, {"field", seconds_since(t0)}}},
                      {"history", history_json(b, model_labels)}};
-        result.methods.push_back(std::move(m));
+        return m;
     }
 
-    // 5. Baselines.
-    run_baselines(in, fixed, fixed_labels, roi, structures, s, result, report);
+}
 
-    // 6. Every method through the alignment, evaluated.
-    report(0.92, "evaluation");
+/// Every method brought through the initial alignment (when applied; the alignment alone becomes a
+/// method too) and evaluated; a failed baseline is listed, and the run fails only if it was the chosen method.
+json evaluate_methods(const ImagePair& original, const ImagePair& in, const LabelVolume& fixed_labels, const std::vector<std::int32_t>& structures,
+                      const ImageRegistrationSettings& s, ImageRegistrationResult& result)
+{
+    const SegmentationAlignment& alignment = result.alignment;
+    const ImageGeometry& roi = result.region;
     auto& methods = result.methods;
     methods.front().warped_labels = resample_labels(original.moving_labels, methods.front().field);
     if (original.landmarks_moving) methods.front().landmarks = *original.landmarks_moving;
@@ -544,16 +519,17 @@ ImageRegistrationResult register_images(const ImagePair& original, const ImageRe
         if (names_method(name, s.method) && std::none_of(methods.begin(), methods.end(), [&](const ImageMethodOutcome& m) { return m.name.rfind(s.method + "_", 0) == 0; }))
             fail("register-images: the chosen --method {} failed: {}", s.method, reason);
     }
-    // The written result: the chosen method (baselines: on intensities when run, else labels).
-    std::optional<std::size_t> chosen;
-    for (std::size_t k = 0; k < methods.size(); ++k)
-        if (methods[k].name == s.method || methods[k].name == s.method + "_intensity" || (!chosen && methods[k].name == s.method + "_labels")) chosen = k;
-    if (!chosen) fail("register-images: method {} was not run", s.method);
-    result.chosen = *chosen;
-    result.warped_moving = resample_image(original.moving, result.chosen_method().field, 0.0f);
+    return methods_json;
+}
 
-    // parameters.json: the estimated moduli with their sensitivity, the boundary load.
-    json& parameters = result.parameters;
+/// parameters.json: the estimated moduli with their sensitivity, the boundary load.
+json parameters_json(const ImageModel& model, const TissueTable& tissues, const SegmentationRegistrationResult& b, const SegmentationRegistrationOptions& reg)
+{
+    const std::vector<std::int32_t>& model_labels = model.labels;
+    const auto& initial_e = model.initial_e;
+    const auto& map_of = model.map_of;
+    const auto& force_nodes = model.force_nodes;
+    json parameters;
     parameters["units"] = {{"young_modulus", "Pa"}, {"force", "N"}, {"length", "mm"}};
     parameters["parametrisation"] = to_string(reg.parametrisation);
     json structures_json = json::array();
@@ -582,8 +558,25 @@ ImageRegistrationResult register_images(const ImagePair& original, const ImageRe
     }
     parameters["boundary_load"] = {{"nodes", force_nodes.size()}, {"sum_of_magnitudes_n", total_force}, {"max_nodal_n", max_force}, {"per_node", "mesh.vtu point data 'force'"}};
 
-    // summary.json: inputs, the settings used, the model, every method.
-    json& summary = result.summary;
+    return parameters;
+}
+
+/// summary.json: inputs, the settings used, the model, every method (its seconds added by the caller).
+json summary_json(const ImagePair& original, const ImageRegistrationSettings& s, const ImageRegistrationResult& result, const ImageModel& model,
+                  const json& methods_json, const SegmentationRegistrationOptions& reg)
+{
+    const auto& structures = result.structures;
+    const ImageGeometry& roi = result.region;
+    const VolumeMesh& mesh = result.mesh;
+    const SegmentationAlignment& alignment = result.alignment;
+    const SegmentationRegistrationResult& b = result.biomechanical;
+    const std::vector<std::int32_t>& model_labels = model.labels;
+    const LinearElasticOptions& elastic = model.elastic;
+    const auto& force_nodes = model.force_nodes;
+    const SegmentationObjective& objective = *model.objective;
+    const TetrahedronQuality& quality = model.quality;
+    const double mesh_s = model.meshing_s;
+    json summary;
     summary["command"] = "register-images";
     summary["units"] = {{"length", "mm"}, {"force", "N"}, {"time", "s"}, {"young_modulus", "Pa"}};
     summary["inputs"] = original.description;
@@ -637,7 +630,98 @@ ImageRegistrationResult register_images(const ImagePair& original, const ImageRe
                               {"rms_margin_mm", alignment.runner_up_margin_mm}};
     }
     summary["methods"] = methods_json;
-    summary["seconds"] = seconds_since(start);
+    return summary;
+}
+
+} // namespace
+
+ImageRegistrationResult register_images(const ImagePair& original, const ImageRegistrationSettings& settings,
+                                        const std::function<void(double, const std::string&)>& progress)
+{
+    const auto start = std::chrono::steady_clock::now();
+    const auto report = [&](double f, const std::string& m) {
+        if (progress) progress(f, m);
+    };
+    validate(settings, SettingNaming::option);
+    const auto same = [](const ImageGeometry& a, const ImageGeometry& b) { return a.size == b.size && (a.origin - b.origin).norm() < 1e-6 && (a.spacing - b.spacing).norm() < 1e-9; };
+    if (!same(original.fixed.geometry, original.fixed_labels.geometry)) fail("register-images: the fixed image and --fixed-labels are on different grids");
+    if (!same(original.moving.geometry, original.moving_labels.geometry)) fail("register-images: the moving image and --moving-labels are on different grids");
+    if (original.landmarks_fixed.has_value() != original.landmarks_moving.has_value())
+        fail("register-images: give both --landmarks-fixed and --landmarks-moving, or neither");
+
+    ImageRegistrationResult result;
+    result.settings = settings;
+    result.settings.hold = settings.hold == "auto" ? original.auto_hold : settings.hold;
+    const ImageRegistrationSettings& s = result.settings;
+    if (s.hold != "posterior" && s.hold != "none") fail("--hold '{}': use posterior, none or auto", s.hold);
+
+    // 1. Structures and tissues.
+    result.structures = resolve_structures(original, settings.structures);
+    const std::vector<std::int32_t>& structures = result.structures;
+    const TissueTable tissues = resolve_tissues(original, structures);
+
+    // 2. Initial alignment.
+    report(0.01, "initial alignment");
+    const InitialAlignment initial_mode = parse_initial_alignment(s.initial);
+    result.alignment = align_segmentations(original.fixed_labels, original.moving_labels, structures, initial_mode, s.initial_max_rotation);
+    const SegmentationAlignment& alignment = result.alignment;
+    if (initial_mode != InitialAlignment::identity)
+        logger()->info("register-images: initial alignment ({}, start {}): rotation {:.2f}°, translation ({:.1f}, {:.1f}, {:.1f}) mm; structures' boundary RMS "
+                       "distance {:.2f} → {:.2f} mm", s.initial, alignment.start, alignment.rotation_deg, alignment.translation[0], alignment.translation[1],
+                       alignment.translation[2], alignment.rms_boundary_distance_before_mm, alignment.rms_boundary_distance_mm);
+    if (initial_mode == InitialAlignment::rigid) {
+        logger()->info("register-images: initial alignment: {}", alignment.decision);
+        if (!alignment.runner_up.empty())
+            logger()->info("register-images: initial alignment: runner-up {} ({:.1f}° from the winner), {:+.2f} mm RMS boundary distance",
+                           alignment.runner_up, alignment.runner_up_rotation_deg, alignment.runner_up_margin_mm);
+    }
+    std::tie(result.aligned, result.alignment_decision) = alignment_decision(alignment, s);
+    if (initial_mode != InitialAlignment::identity) logger()->info("register-images: initial alignment {}", result.alignment_decision);
+    const ImagePair in = result.aligned ? aligned_pair(original, alignment) : original;
+    if (!result.aligned) require_overlap(in);
+
+    // 3. Region, mesh, supports.
+    result.region = region_of_interest(in, structures, s.margin);
+    const ImageGeometry& roi = result.region;
+    const ScalarImage fixed = crop<ScalarImage>(in.fixed, roi, in.fixed.values);
+    const LabelVolume fixed_labels = crop<LabelVolume>(in.fixed_labels, roi, in.fixed_labels.labels);
+    logger()->info("register-images: structures {}, region {}×{}×{} voxels", fmt::join(structures, ","), roi.size[0], roi.size[1], roi.size[2]);
+    report(0.02, "meshing");
+    const ImageModel model = build_image_model(in, fixed_labels, structures, tissues, s, result);
+    const VolumeMesh& mesh = result.mesh;
+    const std::vector<std::int32_t>& model_labels = model.labels;
+
+    // 4. The biomechanical registration and its dense inverse field.
+    result.methods.push_back({"at_rest", zero_field(roi), std::nullopt, {}, 0.0, json::object()});
+    report(0.05, "biomechanical registration");
+    const SegmentationRegistrationOptions reg = s.solver_options();
+    result.biomechanical = register_segmentation(mesh, model.elastic, *model.objective, model.force_nodes, model.initial_e, reg, [&](double f, const std::string& m) { report(0.05 + 0.45 * f, m); });
+    const SegmentationRegistrationResult& b = result.biomechanical;
+    if (b.inverted_elements > 0)
+        logger()->warn("register-images: {} of {} tetrahedra are inverted in the biomechanical result (summary.json: model.inverted_elements); the dense field is "
+                       "still written", b.inverted_elements, mesh.cell_count());
+    result.methods.push_back(biomechanical_outcome(in, mesh, model_labels, b, reg, roi, s));
+
+    // 5. Baselines.
+    run_baselines(in, fixed, fixed_labels, roi, structures, s, result, report);
+
+    // 6. Every method through the alignment, evaluated.
+    report(0.92, "evaluation");
+    auto& methods = result.methods;
+    const json methods_json = evaluate_methods(original, in, fixed_labels, structures, s, result);
+
+    // The written result: the chosen method (baselines: on intensities when run, else labels).
+    std::optional<std::size_t> chosen;
+    for (std::size_t k = 0; k < methods.size(); ++k)
+        if (methods[k].name == s.method || methods[k].name == s.method + "_intensity" || (!chosen && methods[k].name == s.method + "_labels")) chosen = k;
+    if (!chosen) fail("register-images: method {} was not run", s.method);
+    result.chosen = *chosen;
+    result.warped_moving = resample_image(original.moving, result.chosen_method().field, 0.0f);
+
+    // 7. parameters.json and summary.json.
+    result.parameters = parameters_json(model, tissues, b, reg);
+    result.summary = summary_json(original, s, result, model, methods_json, reg);
+    result.summary["seconds"] = seconds_since(start);
     return result;
 }
 
