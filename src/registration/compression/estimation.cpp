@@ -79,6 +79,118 @@ std::vector<std::pair<std::string, TreReport>> evaluate_cases(const LiverModel& 
     return out;
 }
 
+namespace {
+
+/// A parameter the estimation moves (as its log10), with its slot in the model parameters and bounds.
+struct FreeParameter {
+    const char* name;
+    double* (*slot)(ModelParameters&);
+    double lo, hi;
+};
+
+/// The free parameters the options and the model variant call for.
+std::vector<FreeParameter> free_parameters(const ModelParameters& initial, const EstimationOptions& options)
+{
+    std::vector<FreeParameter> free;
+    const bool coupled = initial.variant == ModelVariant::coupled;
+    if (coupled && options.fit_coupling) {
+        free.push_back({"k_c_s_t_n_per_m", [](ModelParameters& p) { return &p.coupling.parenchyma_tumour_n_per_m; }, options.k_min_n_per_m, options.k_max_n_per_m});
+        free.push_back({"k_c_s_v_n_per_m", [](ModelParameters& p) { return &p.coupling.parenchyma_vessel_n_per_m; }, options.k_min_n_per_m, options.k_max_n_per_m});
+    }
+    if (options.fit_moduli && initial.variant != ModelVariant::homogeneous) {
+        free.push_back({"tumour_young_pa", [](ModelParameters& p) { return &p.tumour_young_pa; }, options.modulus_min_pa, options.modulus_max_pa});
+        free.push_back({"vessel_young_pa", [](ModelParameters& p) { return &p.vessel_young_pa; }, options.modulus_min_pa, options.modulus_max_pa});
+    }
+    if (options.fit_body_modulus && initial.region == ModelRegion::body)
+        free.push_back({"body_young_pa", [](ModelParameters& p) { return &p.body_young_pa; }, options.body_modulus_min_pa, options.body_modulus_max_pa});
+    return free;
+}
+
+/// NLopt (BOBYQA or Nelder–Mead) over the free parameters' log10 values from x; x and best are the
+/// best point seen and its value; the optimiser's name and stop reason go into result. An error
+/// inside the objective stops the run and is re-raised.
+void minimise_with_nlopt(const std::function<double(const std::vector<double>&)>& objective, const std::vector<FreeParameter>& free,
+                         const EstimationOptions& options, std::vector<double>& x, double& best, EstimationResult& result)
+{
+    std::string failure;
+    const auto algorithm = options.algorithm == "bobyqa" ? nlopt::LN_BOBYQA : nlopt::LN_NELDERMEAD;
+    nlopt::opt opt(algorithm, static_cast<unsigned>(free.size()));
+    std::vector<double> lo, hi, step;
+    for (const auto& f : free) lo.push_back(std::log10(f.lo)), hi.push_back(std::log10(f.hi)), step.push_back(0.5);
+    opt.set_lower_bounds(lo);
+    opt.set_upper_bounds(hi);
+    opt.set_initial_step(step);
+    opt.set_xtol_abs(options.x_tolerance_decades);
+    opt.set_maxeval(options.max_evaluations);
+    struct Context {
+        const std::function<double(const std::vector<double>&)>* f;
+        std::string* failure;
+        nlopt::opt* opt;
+    } context{&objective, &failure, &opt};
+    opt.set_min_objective(
+        [](const std::vector<double>& v, std::vector<double>&, void* data) {
+            auto* c = static_cast<Context*>(data);
+            try {
+                return (*c->f)(v);
+            } catch (const std::exception& e) {
+                *c->failure = e.what();
+                c->opt->force_stop();
+                return HUGE_VAL;
+            }
+        },
+        &context);
+    nlopt::result code = nlopt::FAILURE;
+    try {
+        code = opt.optimize(x, best);
+    } catch (const nlopt::forced_stop&) {
+        code = nlopt::FORCED_STOP;
+    } catch (const std::exception& e) {
+        if (failure.empty()) fail("estimation: optimiser {} failed: {}", opt.get_algorithm_name(), e.what());
+    }
+    if (!failure.empty()) fail("estimation stopped: {}", failure);
+    result.optimiser = std::string("NLopt ") + (options.algorithm == "bobyqa" ? "LN_BOBYQA" : "LN_NELDERMEAD");
+    switch (code) {
+    case nlopt::XTOL_REACHED: result.stop_reason = "parameter tolerance reached"; break;
+    case nlopt::FTOL_REACHED: result.stop_reason = "objective tolerance reached"; break;
+    case nlopt::MAXEVAL_REACHED: result.stop_reason = "evaluation budget used (may not be converged)"; break;
+    case nlopt::SUCCESS: result.stop_reason = "converged"; break;
+    default: result.stop_reason = fmt::format("NLopt code {}", static_cast<int>(code)); break;
+    }
+}
+
+/// The objective's change per decade of each parameter, from the evaluations that moved it alone
+/// from the start (the optimiser's first steps); infeasible evaluations are left out.
+std::vector<EstimationResult::Sensitivity> parameter_profiles(const std::vector<FreeParameter>& free, const std::vector<EstimationStep>& history,
+                                                              double infeasible_mm)
+{
+    std::vector<EstimationResult::Sensitivity> profiles;
+    auto log_of = [&](const ModelParameters& p) {
+        std::vector<double> v;
+        for (const auto& f : free) v.push_back(std::log10(*f.slot(const_cast<ModelParameters&>(p))));
+        return v;
+    };
+    const auto start = log_of(history.front().parameters);
+    const double start_value = history.front().objective_mm;
+    for (std::size_t i = 0; i < free.size(); ++i) {
+        EstimationResult::Sensitivity s{free[i].name, 0.0, 0, false};
+        for (const auto& step : history) {
+            if (step.objective_mm >= infeasible_mm) continue;
+            const auto x = log_of(step.parameters);
+            bool alone = std::abs(x[i] - start[i]) > 1e-6;
+            for (std::size_t j = 0; j < free.size() && alone; ++j)
+                if (j != i && std::abs(x[j] - start[j]) > 1e-9) alone = false;
+            if (!alone) continue;
+            s.mm_per_decade = std::max(s.mm_per_decade, std::abs(step.objective_mm - start_value) / std::abs(x[i] - start[i]));
+            ++s.evaluations;
+        }
+        s.identifiable = s.evaluations > 0 && s.mm_per_decade >= EstimationResult::identifiable_mm_per_decade;
+        profiles.push_back(s);
+    }
+    return profiles;
+}
+
+} // namespace
+
 EstimationResult estimate_parameters(const LabelVolume& rest_labels, const LabelRoles& roles, const ModelParameters& initial,
                                      const LandmarkSet& rest_landmarks, const std::vector<CompressionCase>& train,
                                      const std::vector<CompressionCase>& validation, const EstimationOptions& options,
@@ -93,24 +205,7 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
     const auto t0 = std::chrono::steady_clock::now();
     EstimationResult result;
     result.fingerprint = build_liver_model(rest_labels, roles, initial, "rest labels").fingerprint;
-    // Free parameters, as log10 values.
-    struct Free {
-        const char* name;
-        double* (*slot)(ModelParameters&);
-        double lo, hi;
-    };
-    std::vector<Free> free;
-    const bool coupled = initial.variant == ModelVariant::coupled;
-    if (coupled && options.fit_coupling) {
-        free.push_back({"k_c_s_t_n_per_m", [](ModelParameters& p) { return &p.coupling.parenchyma_tumour_n_per_m; }, options.k_min_n_per_m, options.k_max_n_per_m});
-        free.push_back({"k_c_s_v_n_per_m", [](ModelParameters& p) { return &p.coupling.parenchyma_vessel_n_per_m; }, options.k_min_n_per_m, options.k_max_n_per_m});
-    }
-    if (options.fit_moduli && initial.variant != ModelVariant::homogeneous) {
-        free.push_back({"tumour_young_pa", [](ModelParameters& p) { return &p.tumour_young_pa; }, options.modulus_min_pa, options.modulus_max_pa});
-        free.push_back({"vessel_young_pa", [](ModelParameters& p) { return &p.vessel_young_pa; }, options.modulus_min_pa, options.modulus_max_pa});
-    }
-    if (options.fit_body_modulus && initial.region == ModelRegion::body)
-        free.push_back({"body_young_pa", [](ModelParameters& p) { return &p.body_young_pa; }, options.body_modulus_min_pa, options.body_modulus_max_pa});
+    const std::vector<FreeParameter> free = free_parameters(initial, options);
     for (const auto& f : free) result.free_parameters.push_back(f.name);
     auto parameters_at = [&](const std::vector<double>& x) {
         ModelParameters p = initial;
@@ -119,7 +214,6 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
     };
     const int budget = free.empty() ? 1 : options.max_evaluations;
     constexpr double infeasible_mm = 1e3;
-    std::string failure;
     // Each evaluation starts from the previous one's equilibria: nearby parameters move the
     // tissue little, so relaxation needs a fraction of the iterations from rest.
     std::vector<std::vector<double>> warm(train.size());
@@ -161,50 +255,8 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
         result.objective_mm = objective(x);
         result.fitted = initial;
     } else {
-        const auto algorithm = options.algorithm == "bobyqa" ? nlopt::LN_BOBYQA : nlopt::LN_NELDERMEAD;
-        nlopt::opt opt(algorithm, static_cast<unsigned>(free.size()));
-        std::vector<double> lo, hi, step;
-        for (const auto& f : free) lo.push_back(std::log10(f.lo)), hi.push_back(std::log10(f.hi)), step.push_back(0.5);
-        opt.set_lower_bounds(lo);
-        opt.set_upper_bounds(hi);
-        opt.set_initial_step(step);
-        opt.set_xtol_abs(options.x_tolerance_decades);
-        opt.set_maxeval(options.max_evaluations);
-        struct Context {
-            decltype(objective)* f;
-            std::string* failure;
-            nlopt::opt* opt;
-        } context{&objective, &failure, &opt};
-        opt.set_min_objective(
-            [](const std::vector<double>& v, std::vector<double>&, void* data) {
-                auto* c = static_cast<Context*>(data);
-                try {
-                    return (*c->f)(v);
-                } catch (const std::exception& e) {
-                    *c->failure = e.what();
-                    c->opt->force_stop();
-                    return HUGE_VAL;
-                }
-            },
-            &context);
         double best = 0.0;
-        nlopt::result code = nlopt::FAILURE;
-        try {
-            code = opt.optimize(x, best);
-        } catch (const nlopt::forced_stop&) {
-            code = nlopt::FORCED_STOP;
-        } catch (const std::exception& e) {
-            if (failure.empty()) fail("estimation: optimiser {} failed: {}", opt.get_algorithm_name(), e.what());
-        }
-        if (!failure.empty()) fail("estimation stopped: {}", failure);
-        result.optimiser = std::string("NLopt ") + (options.algorithm == "bobyqa" ? "LN_BOBYQA" : "LN_NELDERMEAD");
-        switch (code) {
-        case nlopt::XTOL_REACHED: result.stop_reason = "parameter tolerance reached"; break;
-        case nlopt::FTOL_REACHED: result.stop_reason = "objective tolerance reached"; break;
-        case nlopt::MAXEVAL_REACHED: result.stop_reason = "evaluation budget used (may not be converged)"; break;
-        case nlopt::SUCCESS: result.stop_reason = "converged"; break;
-        default: result.stop_reason = fmt::format("NLopt code {}", static_cast<int>(code)); break;
-        }
+        minimise_with_nlopt(objective, free, options, x, best, result);
         // The best point NLopt saw (it returns it in x).
         result.fitted = parameters_at(x);
         result.objective_mm = best;
@@ -216,30 +268,7 @@ EstimationResult estimate_parameters(const LabelVolume& rest_labels, const Label
             }
     }
     // One-parameter steps from the start: a profile of each parameter around it.
-    if (!result.history.empty() && !free.empty()) {
-        auto log_of = [&](const ModelParameters& p) {
-            std::vector<double> v;
-            for (const auto& f : free) v.push_back(std::log10(*f.slot(const_cast<ModelParameters&>(p))));
-            return v;
-        };
-        const auto start = log_of(result.history.front().parameters);
-        const double start_value = result.history.front().objective_mm;
-        for (std::size_t i = 0; i < free.size(); ++i) {
-            EstimationResult::Sensitivity s{free[i].name, 0.0, 0, false};
-            for (const auto& step : result.history) {
-                if (step.objective_mm >= infeasible_mm) continue;
-                const auto x = log_of(step.parameters);
-                bool alone = std::abs(x[i] - start[i]) > 1e-6;
-                for (std::size_t j = 0; j < free.size() && alone; ++j)
-                    if (j != i && std::abs(x[j] - start[j]) > 1e-9) alone = false;
-                if (!alone) continue;
-                s.mm_per_decade = std::max(s.mm_per_decade, std::abs(step.objective_mm - start_value) / std::abs(x[i] - start[i]));
-                ++s.evaluations;
-            }
-            s.identifiable = s.evaluations > 0 && s.mm_per_decade >= EstimationResult::identifiable_mm_per_decade;
-            result.sensitivity.push_back(s);
-        }
-    }
+    if (!result.history.empty() && !free.empty()) result.sensitivity = parameter_profiles(free, result.history, infeasible_mm);
     // The training reports of the best evaluation (NLopt returns the best point it evaluated).
     if (best_value == result.objective_mm) {
         result.train = best_reports;
