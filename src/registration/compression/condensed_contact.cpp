@@ -224,6 +224,69 @@ void CondensedContactModel::add_candidates(const std::vector<std::int32_t>& adde
     std::erase_if(m_outside, [&](std::int32_t n) { return now.count(n) > 0; });
 }
 
+namespace {
+
+struct LcpSolution {
+    int sweeps = 0;            ///< pivots and Gauss–Seidel sweeps
+    bool converged = true;
+    double violation_mm = 0.0; ///< complementarity violation left (Gauss–Seidel only)
+};
+
+/// The contact LCP w = q + D λ ≥ 0, λ ≥ 0, wᵀλ = 0 (D = Nᵀ W N, mm/N; q, mm): block principal
+/// pivoting (an active-set method) from the warm start λ, then projected Gauss–Seidel if it cycles.
+LcpSolution solve_contact_lcp(const Eigen::MatrixXd& dm, const Eigen::VectorXd& q, Eigen::VectorXd& lambda, double tolerance_mm, int max_sweeps)
+{
+    LcpSolution out;
+    const Eigen::Index m = q.size();
+    std::vector<char> active(static_cast<std::size_t>(m), 0);
+    for (Eigen::Index a = 0; a < m; ++a) active[static_cast<std::size_t>(a)] = lambda(a) > 0 || q(a) < 0;
+    bool solved = false;
+    for (int pivot = 0; pivot < 30 && !solved; ++pivot) {
+        std::vector<Eigen::Index> idx;
+        for (Eigen::Index a = 0; a < m; ++a)
+            if (active[static_cast<std::size_t>(a)]) idx.push_back(a);
+        lambda.setZero();
+        if (!idx.empty()) {
+            const auto na = static_cast<Eigen::Index>(idx.size());
+            Eigen::MatrixXd daa(na, na);
+            Eigen::VectorXd rhs(na);
+            for (Eigen::Index a = 0; a < na; ++a) {
+                rhs(a) = -q(idx[static_cast<std::size_t>(a)]);
+                for (Eigen::Index b = 0; b < na; ++b) daa(a, b) = dm(idx[static_cast<std::size_t>(a)], idx[static_cast<std::size_t>(b)]);
+            }
+            const Eigen::VectorXd la = daa.ldlt().solve(rhs);
+            for (Eigen::Index a = 0; a < na; ++a) lambda(idx[static_cast<std::size_t>(a)]) = la(a);
+        }
+        const Eigen::VectorXd w = q + dm * lambda;
+        bool changed = false;
+        for (Eigen::Index a = 0; a < m; ++a) {
+            const double scale = dm(a, a);
+            if (active[static_cast<std::size_t>(a)] && lambda(a) < -tolerance_mm / scale) active[static_cast<std::size_t>(a)] = 0, changed = true;
+            else if (!active[static_cast<std::size_t>(a)] && w(a) < -tolerance_mm) active[static_cast<std::size_t>(a)] = 1, changed = true;
+        }
+        ++out.sweeps;
+        solved = !changed;
+    }
+    if (!solved) {
+        lambda = lambda.cwiseMax(0.0);
+        double violation = 1e300;
+        for (int sweep = 0; sweep < max_sweeps && violation > tolerance_mm; ++sweep, ++out.sweeps) {
+            violation = 0.0;
+            for (Eigen::Index a = 0; a < m; ++a) {
+                const double w = q(a) + dm.row(a).dot(lambda);
+                const double next = std::max(0.0, lambda(a) - w / dm(a, a));
+                violation = std::max(violation, std::abs(std::min(w, next * dm(a, a))));
+                lambda(a) = next;
+            }
+        }
+        out.violation_mm = violation;
+        out.converged = violation <= tolerance_mm;
+    }
+    return out;
+}
+
+} // namespace
+
 CondensedContactModel::~CondensedContactModel() = default;
 CondensedContactModel::CondensedContactModel(CondensedContactModel&&) noexcept = default;
 
@@ -318,54 +381,13 @@ CondensedContactModel::Update CondensedContactModel::move_to(const Indenter& too
                 dm(a, b) = normal[i].dot(m_wcc.block<3, 3>(static_cast<Eigen::Index>(3 * i), static_cast<Eigen::Index>(3 * j)) * normal[j]);
             }
         }
-        // Block principal pivoting (an active-set method) from the warm start, then projected
-        // Gauss–Seidel if it cycles.
-        std::vector<char> active(static_cast<std::size_t>(m), 0);
-        for (Eigen::Index a = 0; a < m; ++a) active[static_cast<std::size_t>(a)] = lambda(a) > 0 || q(a) < 0;
-        bool solved = false;
-        for (int pivot = 0; pivot < 30 && !solved; ++pivot) {
-            std::vector<Eigen::Index> idx;
-            for (Eigen::Index a = 0; a < m; ++a)
-                if (active[static_cast<std::size_t>(a)]) idx.push_back(a);
-            lambda.setZero();
-            if (!idx.empty()) {
-                const auto na = static_cast<Eigen::Index>(idx.size());
-                Eigen::MatrixXd daa(na, na);
-                Eigen::VectorXd rhs(na);
-                for (Eigen::Index a = 0; a < na; ++a) {
-                    rhs(a) = -q(idx[static_cast<std::size_t>(a)]);
-                    for (Eigen::Index b = 0; b < na; ++b) daa(a, b) = dm(idx[static_cast<std::size_t>(a)], idx[static_cast<std::size_t>(b)]);
-                }
-                const Eigen::VectorXd la = daa.ldlt().solve(rhs);
-                for (Eigen::Index a = 0; a < na; ++a) lambda(idx[static_cast<std::size_t>(a)]) = la(a);
-            }
-            const Eigen::VectorXd w = q + dm * lambda;
-            bool changed = false;
-            for (Eigen::Index a = 0; a < m; ++a) {
-                const double scale = dm(a, a);
-                if (active[static_cast<std::size_t>(a)] && lambda(a) < -m_options.lcp_tolerance_mm / scale) active[static_cast<std::size_t>(a)] = 0, changed = true;
-                else if (!active[static_cast<std::size_t>(a)] && w(a) < -m_options.lcp_tolerance_mm) active[static_cast<std::size_t>(a)] = 1, changed = true;
-            }
-            ++up.sweeps;
-            solved = !changed;
-        }
-        if (!solved) {
-            lambda = lambda.cwiseMax(0.0);
-            double violation = 1e300;
-            for (int sweep = 0; sweep < m_options.lcp_max_sweeps && violation > m_options.lcp_tolerance_mm; ++sweep, ++up.sweeps) {
-                violation = 0.0;
-                for (Eigen::Index a = 0; a < m; ++a) {
-                    const double w = q(a) + dm.row(a).dot(lambda);
-                    const double next = std::max(0.0, lambda(a) - w / dm(a, a));
-                    violation = std::max(violation, std::abs(std::min(w, next * dm(a, a))));
-                    lambda(a) = next;
-                }
-            }
-            if (violation > m_options.lcp_tolerance_mm)
-                fail("condensed contact: the contact problem at the tool position ({:.2f}, {:.2f}, {:.2f}) mm did not converge "
-                     "({} nodes, complementarity violation {:.3g} mm after {} sweeps)",
-                     position_mm.x(), position_mm.y(), position_mm.z(), m, violation, m_options.lcp_max_sweeps);
-        }
+        // The LCP: w = q + D λ ≥ 0, λ ≥ 0, wᵀλ = 0, from the warm start.
+        const LcpSolution lcp = solve_contact_lcp(dm, q, lambda, m_options.lcp_tolerance_mm, m_options.lcp_max_sweeps);
+        up.sweeps += lcp.sweeps;
+        if (!lcp.converged)
+            fail("condensed contact: the contact problem at the tool position ({:.2f}, {:.2f}, {:.2f}) mm did not converge "
+                 "({} nodes, complementarity violation {:.3g} mm after {} sweeps)",
+                 position_mm.x(), position_mm.y(), position_mm.z(), m, lcp.violation_mm, m_options.lcp_max_sweeps);
         // New forces along the new normals; re-linearise at the displacement they give.
         std::fill(m_lambda.begin(), m_lambda.end(), 0.0);
         m_force.setZero();
