@@ -46,6 +46,51 @@ inline Real tetrahedron_forces(const std::int32_t* ids, const Real* u, const Rea
     return j;
 }
 
+/// Contact nodes: only the tangential part of the residual s r − f counts (frictionless contact), N.
+template <typename Real>
+double tangential_contact_residual(const std::vector<std::int32_t>& nodes, const std::vector<Vec3>& normals, const std::vector<std::uint8_t>& constrained,
+                                   const Real* r, const Real* fn, Real s)
+{
+    double residual = 0.0;
+    for (std::size_t c = 0; c < nodes.size(); ++c) {
+        const std::size_t node = static_cast<std::size_t>(nodes[c]);
+        Vec3 res;
+        for (int d = 0; d < 3; ++d) res[d] = constrained[3 * node + d] ? 0.0 : double(s * r[3 * node + d] - fn[3 * node + d]);
+        res -= res.dot(normals[c]) * normals[c];
+        residual = std::max(residual, res.cwiseAbs().maxCoeff());
+    }
+    return residual;
+}
+
+/// A node held by a tool keeps its sliding (tangential) momentum and loses the normal one: its
+/// previous position is moved so that u − u_prev is the tangential part of its last increment.
+template <typename Real>
+void keep_tangential_momentum(const std::vector<std::int32_t>& nodes, const std::vector<Vec3>& normals, const std::vector<Real>& u, std::vector<Real>& u_prev)
+{
+    for (std::size_t c = 0; c < nodes.size(); ++c) {
+        const std::size_t node = static_cast<std::size_t>(nodes[c]);
+        const Vec3& n = normals[c];
+        Vec3 v;
+        for (int d = 0; d < 3; ++d) v[d] = double(u[3 * node + d]) - double(u_prev[3 * node + d]);
+        const Vec3 tangential = v - v.dot(n) * n;
+        for (int d = 0; d < 3; ++d) u_prev[3 * node + d] = static_cast<Real>(double(u[3 * node + d]) - tangential[d]);
+    }
+}
+
+/// The distance still to go, mm, from the largest increments' contraction rate ρ over the last 20
+/// iterations: ρ / (1 − ρ) × the last increment (a geometric series); infinite while not contracting.
+double distance_to_equilibrium(const std::vector<double>& increment_history)
+{
+    const double increment = increment_history.back();
+    double rho = 1.0;
+    const std::size_t window = 20;
+    if (increment_history.size() > window) {
+        const double old = increment_history[increment_history.size() - 1 - window];
+        if (old > 0) rho = std::pow(increment / old, 1.0 / double(window));
+    }
+    return rho < 1.0 ? rho / (1.0 - rho) * increment : std::numeric_limits<double>::infinity();
+}
+
 } // namespace
 
 void EquilibriumOptions::validate() const
@@ -704,14 +749,7 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
             num[blk] = nb;
             den[blk] = db;
         }
-        // Contact nodes: only the tangential residual counts (frictionless contact).
-        for (std::size_t c = 0; c < m_contact_normal_node.size(); ++c) {
-            const std::size_t node = static_cast<std::size_t>(m_contact_normal_node[c]);
-            Vec3 res;
-            for (int d = 0; d < 3; ++d) res[d] = m_constrained[3 * node + d] ? 0.0 : double(s * r[3 * node + d] - fn[3 * node + d]);
-            res -= res.dot(m_contact_normal[c]) * m_contact_normal[c];
-            residual = std::max(residual, res.cwiseAbs().maxCoeff());
-        }
+        residual = std::max(residual, tangential_contact_residual(m_contact_normal_node, m_contact_normal, m_constrained, r, fn, s));
         if (!(largest <= 10.0 * m_model.diagonal_mm())) check_state(un, "equilibrium"); // throws, naming the node
         double sum_num = 0, sum_den = 0;
         for (std::size_t blk = 0; blk < blocks; ++blk) {
@@ -722,28 +760,14 @@ SolveSummary TledSolver<Real>::solve_equilibrium(const EquilibriumOptions& optio
         damping = std::min(damping, 1.9);
         std::swap(m_u_prev, m_u);
         std::swap(m_u, m_u_next);
-        // A node held by a tool keeps its sliding (tangential) momentum and loses the normal one.
-        for (std::size_t c = 0; c < m_contact_normal_node.size(); ++c) {
-            const std::size_t node = static_cast<std::size_t>(m_contact_normal_node[c]);
-            const Vec3& n = m_contact_normal[c];
-            Vec3 v;
-            for (int d = 0; d < 3; ++d) v[d] = double(m_u[3 * node + d]) - double(m_u_prev[3 * node + d]);
-            const Vec3 tangential = v - v.dot(n) * n;
-            for (int d = 0; d < 3; ++d) m_u_prev[3 * node + d] = static_cast<Real>(double(m_u[3 * node + d]) - tangential[d]);
-        }
+        keep_tangential_momentum(m_contact_normal_node, m_contact_normal, m_u, m_u_prev);
 
         // No node has moved farther than √3 × the largest component increment: once the candidates'
         // margin is used up, select them again around the current shape.
         m_candidate_slack -= std::sqrt(3.0) * increment;
         if (m_candidate_slack < 0) select_contact_candidates(m_u.data(), start_factor, load_factor);
         increment_history.push_back(increment);
-        double rho = 1.0;
-        const std::size_t window = 20;
-        if (increment_history.size() > window) {
-            const double old = increment_history[increment_history.size() - 1 - window];
-            if (old > 0) rho = std::pow(increment / old, 1.0 / double(window));
-        }
-        const double estimate = rho < 1.0 ? rho / (1.0 - rho) * increment : std::numeric_limits<double>::infinity();
+        const double estimate = distance_to_equilibrium(increment_history);
         summary.iterations = iteration;
         summary.residual_n = residual;
         summary.reference_force_n = reference;
