@@ -114,6 +114,30 @@ std::int64_t StiffnessAssembler::value_index(std::int32_t i, std::int32_t j, int
     return m_outer[3 * j + c] + 3 * (it - begin) + r;
 }
 
+namespace {
+
+/// The coupling's constant Hessian k φφᵀ ⊗ I₃ per interface point, added at its precomputed value
+/// offsets (`index` from `begin[p]`; a node's column holds 3 rows per neighbour, hence the stride).
+void add_coupling_stiffness(const PenaltyCoupling& coupling, const std::vector<std::int64_t>& index_of, const std::vector<std::int64_t>& begin,
+                            const std::vector<std::int32_t>& node_begin, double* values)
+{
+    for (std::size_t p = 0; p < coupling.points().size(); ++p) {
+        const double k = coupling.point_stiffness_n_per_mm(p);
+        const auto entries = coupling.point_entries(p);
+        const std::int64_t* index = index_of.data() + begin[p];
+        for (const auto& col : entries) {
+            const std::int64_t stride = 3 * (node_begin[col.node + 1] - node_begin[col.node]) + 1;
+            for (const auto& row : entries) {
+                const double kv = k * row.phi * col.phi;
+                const std::int64_t base = *index++;
+                for (int r = 0; r < 3; ++r) values[base + r * stride] += kv;
+            }
+        }
+    }
+}
+
+} // namespace
+
 Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* stiffness) const
 {
     const std::size_t n = m_model.node_count(), e_count = m_model.element_count();
@@ -253,20 +277,7 @@ Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* 
     if (m_coupling) {
         m_coupling->add_forces(u, f);
         result.energy_mj += m_coupling->energy_mj(std::span<const double>(u, 3 * n));
-        if (values)
-            for (std::size_t p = 0; p < m_coupling->points().size(); ++p) {
-                const double k = m_coupling->point_stiffness_n_per_mm(p);
-                const auto entries = m_coupling->point_entries(p);
-                const std::int64_t* index = m_coupling_index.data() + m_coupling_begin[p];
-                for (const auto& col : entries) {
-                    const std::int64_t stride = 3 * (m_node_begin[col.node + 1] - m_node_begin[col.node]) + 1;
-                    for (const auto& row : entries) {
-                        const double kv = k * row.phi * col.phi;
-                        const std::int64_t base = *index++;
-                        for (int r = 0; r < 3; ++r) values[base + r * stride] += kv;
-                    }
-                }
-            }
+        if (values) add_coupling_stiffness(*m_coupling, m_coupling_index, m_coupling_begin, m_node_begin, values);
     }
     return result;
 }
