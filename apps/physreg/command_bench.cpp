@@ -59,10 +59,11 @@ json timing_json(std::vector<double> ms, const std::vector<long>& iterations)
 
 } // namespace
 
-void add_subcommand_bench(CLI::App& app)
+namespace {
+
+/// bench enrich: time per update of the high-resolution model and of coarse-to-fine along compressions.
+void add_bench_enrich(CLI::App* group)
 {
-    auto* group = app.add_subcommand("bench", "Benchmarks of the registration pipeline (JSON)");
-    group->require_subcommand(1);
     struct Options : CommonOptions {
         std::string dataset, parameters, database, states = "A,B,C,D,E", held_out = "D,E", output;
         int steps = 20;
@@ -174,6 +175,11 @@ void add_subcommand_bench(CLI::App& app)
     });
 
     // bench condensed (issue 30).
+}
+
+/// bench condensed: time per update with condensed contact (and coarse-to-fine on top with a database).
+void add_bench_condensed(CLI::App* group)
+{
     struct CondensedOptions : CommonOptions {
         std::string dataset, parameters, states = "A,B,C,D,E", held_out = "D,E", output, nonlinear = "never", database;
         int steps = 20;
@@ -372,6 +378,16 @@ void add_subcommand_bench(CLI::App& app)
             write_atomically(co->output, [&](const fs::path& tmp) { std::ofstream(tmp) << report.dump(2) << "\n"; });
         if (co->json) std::cout << report.dump(2) << std::endl;
     });
+}
+
+} // namespace
+
+void add_subcommand_bench(CLI::App& app)
+{
+    auto* group = app.add_subcommand("bench", "Benchmarks of the registration pipeline (JSON)");
+    group->require_subcommand(1);
+    add_bench_enrich(group);
+    add_bench_condensed(group);
 }
 
 } // namespace physreg::cli

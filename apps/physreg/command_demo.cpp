@@ -154,6 +154,194 @@ nlohmann::json run_meshing_blocks(const std::filesystem::path& dir)
                         {"coarsen_and_embed", coarse_ms}, {"surfaces_and_tetrahedra", surface_ms}}}};
 }
 
+/// A method of the demo's table: its TRE on the held-out (D, E) and training (A, B, C) states, its
+/// times per update, and paper 000's figures where the paper has them.
+struct DemoMethod {
+    std::string name, paper;
+    double paper_all, paper_surface, paper_internal, paper_ms;
+    std::vector<TreReport> tre, tre_train; ///< held-out (D, E); training (A, B, C)
+    std::vector<double> ms;
+};
+
+struct DemoPhantom {
+    bool reused = false;
+    double seconds = 0.0;
+};
+
+/// The demo's phantom dataset in phantom_dir: hard links to an earlier run's (earlier_phantom) when
+/// it was made by this version with the same preset and seed, else generated.
+DemoPhantom demo_phantom(const PhantomSpec& spec, const std::filesystem::path& earlier_phantom, const std::filesystem::path& phantom_dir, bool rebuild)
+{
+    namespace fs = std::filesystem;
+    bool reuse = false;
+    if (!rebuild && fs::exists(earlier_phantom / "manifest.json")) {
+        try {
+            const PhantomDataset old = read_phantom_dataset(earlier_phantom);
+            reuse = old.preset == spec.preset && old.seed == spec.seed && old.generator_version == VERSION;
+        } catch (const Error&) {
+            reuse = false;
+        }
+        if (reuse) {
+            // Hard links: no copy, and the earlier OUTPUT stays whole if this run fails.
+            fs::copy(earlier_phantom, phantom_dir, fs::copy_options::recursive | fs::copy_options::create_hard_links);
+            logger()->info("reusing the phantom dataset of an earlier run in '{}' (--rebuild-phantom makes it anew)", earlier_phantom.string());
+        }
+    }
+    double phantom_s = 0.0;
+    if (!reuse) {
+        const auto t = std::chrono::steady_clock::now();
+        ProgressDisplay bar("phantom");
+        generate_phantom_dataset(spec, phantom_dir, true, [&](double f, const std::string& m) { bar.update(f, m); });
+        bar.finish();
+        phantom_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+    }
+    return {reuse, phantom_s};
+}
+
+/// A held-out state's outputs: the fine mesh with both solutions and their difference and the
+/// homogeneous one (VTU, ParaView), the predicted landmarks (CSV), slices through the tool's dent with
+/// true and predicted landmarks (paper 000 figs. 8/9) and the map of |coarse-to-fine − high-resolution|
+/// (fig. 11); returns the state's summary entry.
+nlohmann::json write_held_out_outputs(const std::filesystem::path& dir, const PhantomDataset& dataset, const CompressionCase& vc, const LiverModel& fine,
+                                      const LiverModel& homogeneous, const TrackingRun& run, const std::vector<double>& homogeneous_u,
+                                      const LandmarkSet& homogeneous_landmarks, const LabelVolume& rest_labels, double pixels_per_mm)
+{
+    const Vec3 a = vc.tool.path.front(), b = vc.tool.path.back();
+    // VTU for ParaView: the fine mesh with both solutions and their difference; the homogeneous one.
+    std::vector<double> difference(run.high_resolution_u.size()), magnitude(fine.mesh.node_count());
+    double largest = 0.0;
+    for (std::size_t k = 0; k < difference.size(); ++k) difference[k] = run.coarse_to_fine_u[k] - run.high_resolution_u[k];
+    for (std::size_t n = 0; n < magnitude.size(); ++n) {
+        magnitude[n] = Vec3(difference[3 * n], difference[3 * n + 1], difference[3 * n + 2]).norm();
+        largest = std::max(largest, magnitude[n]);
+    }
+    MeshData data;
+    data.point_data = {{"displacement_high_resolution", 3, run.high_resolution_u},
+                       {"displacement_coarse_to_fine", 3, run.coarse_to_fine_u},
+                       {"difference_mm", 3, difference},
+                       {"difference_magnitude_mm", 1, magnitude}};
+    write_vtu(dir / "registration" / (vc.name + "_fine.vtu"), fine.mesh, data);
+    MeshData plain_data;
+    plain_data.point_data = {{"displacement", 3, homogeneous_u}};
+    write_vtu(dir / "registration" / (vc.name + "_homogeneous.vtu"), homogeneous.mesh, plain_data);
+    write_landmarks(dir / "registration" / (vc.name + "_landmarks_high_resolution.csv"), run.high_resolution_landmarks);
+    write_landmarks(dir / "registration" / (vc.name + "_landmarks_coarse_to_fine.csv"), run.coarse_to_fine_landmarks);
+    write_landmarks(dir / "registration" / (vc.name + "_landmarks_homogeneous.csv"), homogeneous_landmarks);
+    // Figures: slices through the tool's dent with true (green) and predicted (red) landmarks
+    // (paper 000 figs. 8/9), and the map of |coarse-to-fine − high-resolution| (fig. 11).
+    const DatasetState& state = dataset.state(vc.name);
+    const ScalarImage intensity = read_scalar_image(dataset.path(state.files.at("intensity")));
+    const LabelVolume labels = read_label_volume(dataset.path(state.files.at("labels")));
+    SliceFigureOptions figure;
+    figure.centre = b + vc.tool.radius_mm * (b - a).normalized();
+    figure.pixels_per_mm = pixels_per_mm;
+    figure.title = fmt::format("{}: TRUE (GREEN) AND COARSE-TO-FINE (RED) LANDMARKS", vc.name);
+    write_png(dir / "figures" / ("slices_" + vc.name + "_coarse_to_fine.png"),
+              render_orthogonal_slices(intensity, labels, dataset.roles, vc.truth, run.coarse_to_fine_landmarks, figure).image());
+    figure.title = fmt::format("{}: TRUE (GREEN) AND HIGH-RESOLUTION (RED) LANDMARKS", vc.name);
+    write_png(dir / "figures" / ("slices_" + vc.name + "_high_resolution.png"),
+              render_orthogonal_slices(intensity, labels, dataset.roles, vc.truth, run.high_resolution_landmarks, figure).image());
+    const ImageGeometry& g = rest_labels.geometry;
+    const SampledField field = sample_displacement_field(fine.mesh, difference, g);
+    ScalarImage heat{g, std::vector<float>(field.inside.size(), std::numeric_limits<float>::quiet_NaN())};
+    for (std::size_t v = 0; v < field.inside.size(); ++v)
+        if (field.inside[v]) heat.values[v] = static_cast<float>(Vec3(field.field.components[3 * v], field.field.components[3 * v + 1], field.field.components[3 * v + 2]).norm());
+    const ScalarImage rest_intensity = read_scalar_image(dataset.path(dataset.state("rest").files.at("intensity")));
+    const LabelVolume rest_label_image = rest_labels;
+    figure.heat = &heat;
+    figure.heat_max = std::max(0.05, std::ceil(largest * 20.0) / 20.0);
+    figure.heat_label = "DIFFERENCE, MM";
+    figure.title = fmt::format("{}: DISPLACEMENT DIFFERENCE, REST CONFIGURATION (MAX {:.2f} MM)", vc.name, largest);
+    write_png(dir / "figures" / ("difference_" + vc.name + ".png"),
+              render_orthogonal_slices(rest_intensity, rest_label_image, dataset.roles, {}, {}, figure).image());
+    return {{"max_difference_high_resolution_vs_coarse_to_fine_mm", largest},
+                          {"matched_conditions", run.last_match.conditions.size()},
+                          {"outside_database_range", run.last_match.outside_range},
+                          {"nearest_stored_position_mm", run.last_match.nearest_position_mm},
+                          {"detail_share", run.last_match.detail}};
+}
+
+/// The demo's table of methods: TRE on the training and held-out states, time per update and
+/// paper 000's figures, as text (returned) and as the summary's rows (`table`).
+std::string demo_table(const std::vector<DemoMethod>& methods, const std::string& preset, std::size_t landmarks, nlohmann::json& table)
+{
+    using json = nlohmann::json;
+    table = json::array();
+    std::string text = fmt::format("\nphysreg demo — {} phantom (body ground truth: gel, tetrahedra, Mooney-Rivlin, unknown moduli), "
+                                   "{} landmarks per compression, {} threads\n\n", preset, landmarks, omp_get_max_threads());
+    text += fmt::format("{:<34}{:>28}{:>28}{:>10}   {}\n", "method", "training A,B,C: all/surf/int", "held-out D,E: all/surf/int", "ms/update",
+                        "paper 000 (all/surface/internal, time)");
+    for (const auto& m : methods) {
+        const TreReport r = pool_tre(m.tre), rt = pool_tre(m.tre_train);
+        const double ms = m.ms.empty() ? 0.0 : std::accumulate(m.ms.begin(), m.ms.end(), 0.0) / double(m.ms.size());
+        text += fmt::format("{:<34}{:>9.2f} /{:>6.2f} /{:>6.2f} mm{:>9.2f} /{:>6.2f} /{:>6.2f} mm{:>10}   {}\n", m.name, rt.all.mean_mm,
+                            rt.surface.mean_mm, rt.internal.mean_mm, r.all.mean_mm, r.surface.mean_mm, r.internal.mean_mm,
+                            m.ms.empty() ? std::string("-") : (ms < 10 ? fmt::format("{:.2f}", ms) : fmt::format("{:.1f}", ms)), m.paper);
+        json row = {{"method", m.name}, {"tre_held_out", json::parse(tre_stats_json(r))}, {"tre_training", json::parse(tre_stats_json(rt))}};
+        if (!m.ms.empty()) row["ms_per_update"] = ms;
+        if (m.paper_all > 0)
+            row["paper_000"] = {{"tre_all_mm", m.paper_all}, {"tre_surface_mm", m.paper_surface}, {"tre_internal_mm", m.paper_internal}, {"ms_per_frame", m.paper_ms}};
+        table.push_back(row);
+    }
+    text += "(rigid: fitted to the 11 noisy surface landmarks of each state, so its surface TRE is a fit residual)\n";
+    return text;
+}
+
+/// The tool followed by condensed contact (or its coarse-to-fine variant) in `steps` positions from
+/// first contact to the last pose; each update's milliseconds into `ms` when given. Returns the field
+/// at the query nodes (fine model).
+std::vector<double> follow_condensed(CondensedContactModel& model, const Indenter& tool, int steps, std::vector<double>* ms)
+{
+    const Vec3 a = tool.path.front(), b = tool.path.back();
+    model.reset();
+    for (int s = 1; s <= steps; ++s) {
+        const auto up = model.move_to(tool, a + (b - a) * double(s) / double(steps));
+        if (ms) ms->push_back(up.contact_ms + up.recovery_ms);
+    }
+    return model.query_field_mm();
+}
+
+std::vector<double> follow_condensed(CondensedCoarseToFine& model, const Indenter& tool, int steps, std::vector<double>* ms)
+{
+    const Vec3 a = tool.path.front(), b = tool.path.back();
+    model.reset();
+    for (int s = 1; s <= steps; ++s) {
+        const Vec3 at = a + (b - a) * double(s) / double(steps);
+        const auto up = model.move_to(tool, at, {"", a, (b - a).normalized(), (at - a).norm()});
+        if (ms) ms->push_back(up.total_ms());
+    }
+    return model.fine_field_mm();
+}
+
+/// summary.json of the demo: the table, the fit (start, bounds, identifiability), the database, per state and timings.
+nlohmann::json demo_summary(const std::string& preset, std::uint64_t seed, const nlohmann::json& table, const EstimationResult& fit,
+                            const std::vector<DemoMethod>& methods, const EnrichmentDatabase& db, std::uintmax_t database_bytes, int blend,
+                            double detail_length, const nlohmann::json& per_state, const nlohmann::json& blocks, const nlohmann::json& seconds)
+{
+    using json = nlohmann::json;
+    return {{"preset", preset},
+                    {"seed", seed},
+                    {"methods", table},
+                    {"fitted", to_json(fit.fitted)},
+                    // The optimiser's start: a fitted value equal to it was not moved by the data.
+                    {"fit_start", fit.history.empty() ? json(nullptr) : to_json(fit.history.front().parameters)},
+                    {"fit_at_bound", fit.at_bound},
+                    {"fit_identifiability", [&] {
+                         json j = json::object();
+                         for (const auto& s : fit.sensitivity)
+                             j[s.parameter] = {{"objective_change_mm_per_decade", s.mm_per_decade}, {"identifiable", s.identifiable}};
+                         return j;
+                     }()},
+                    {"train_tre", json::parse(tre_stats_json(fit.train_pooled))},
+                    {"validation_tre", json::parse(tre_stats_json(pool_tre(methods[1].tre)))},
+                    {"validation_landmarks_at_rest", json::parse(tre_stats_json(pool_tre(methods[4].tre)))},
+                    {"database", {{"conditions", db.conditions.size()}, {"bytes", database_bytes}, {"blend", blend},
+                                  {"detail_length_mm", std::isinf(detail_length) ? json("inf") : json(detail_length)}}},
+                    {"per_state", per_state},
+                    {"meshing_blocks", blocks},
+                    {"seconds", seconds}};
+}
+
 } // namespace
 
 void add_subcommand_demo(CLI::App& app)
@@ -209,29 +397,9 @@ void add_subcommand_demo(CLI::App& app)
         PhantomSpec phantom_spec = PhantomSpec::preset_spec(preset);
         phantom_spec.seed = o->seed;
         phantom_spec.validate();
-        bool reuse = false;
-        const fs::path earlier_phantom = target / "phantom";
-        if (!o->rebuild && fs::exists(earlier_phantom / "manifest.json")) {
-            try {
-                const PhantomDataset old = read_phantom_dataset(earlier_phantom);
-                reuse = old.preset == preset && old.seed == o->seed && old.generator_version == VERSION;
-            } catch (const Error&) {
-                reuse = false;
-            }
-            if (reuse) {
-                // Hard links: no copy, and the earlier OUTPUT stays whole if this run fails.
-                fs::copy(earlier_phantom, phantom_dir, fs::copy_options::recursive | fs::copy_options::create_hard_links);
-                logger()->info("reusing the phantom dataset of an earlier run in '{}' (--rebuild-phantom makes it anew)", earlier_phantom.string());
-            }
-        }
-        double phantom_s = 0.0;
-        if (!reuse) {
-            const auto t = clock::now();
-            ProgressDisplay bar("phantom");
-            generate_phantom_dataset(phantom_spec, phantom_dir, true, [&](double f, const std::string& m) { bar.update(f, m); });
-            bar.finish();
-            phantom_s = seconds_since(t);
-        }
+        const DemoPhantom phantom = demo_phantom(phantom_spec, target / "phantom", phantom_dir, o->rebuild);
+        const bool reuse = phantom.reused;
+        const double phantom_s = phantom.seconds;
         const PhantomDataset dataset = read_phantom_dataset(phantom_dir);
         const LabelVolume rest_labels = read_label_volume(dataset.path(dataset.state("rest").files.at("labels")));
         const LandmarkSet rest_landmarks = read_landmarks(dataset.path(dataset.state("rest").files.at("landmarks")));
@@ -293,13 +461,7 @@ void add_subcommand_demo(CLI::App& app)
         homogeneous_parameters.variant = ModelVariant::homogeneous;
         const LiverModel homogeneous = build_liver_model(rest_labels, dataset.roles, homogeneous_parameters, "phantom rest labels");
         const PredictionOptions prediction;
-        struct Method {
-            std::string name, paper;
-            double paper_all, paper_surface, paper_internal, paper_ms;
-            std::vector<TreReport> tre, tre_train; ///< held-out (D, E); training (A, B, C)
-            std::vector<double> ms;
-        };
-        std::vector<Method> methods{{"homogeneous (Han et al.)", "7.74 / 6.39 / 8.81 mm, 344.83 ms", 7.74, 6.39, 8.81, 344.83, {}, {}, {}},
+        std::vector<DemoMethod> methods{{"homogeneous (Han et al.)", "7.74 / 6.39 / 8.81 mm, 344.83 ms", 7.74, 6.39, 8.81, 344.83, {}, {}, {}},
                                     {"high-resolution heterogeneous", "2.22 / 2.45 / 2.04 mm, 344.83 ms", 2.22, 2.45, 2.04, 344.83, {}, {}, {}},
                                     {"coarse-to-fine", "3.42 / 3.46 / 3.38 mm, 36.76 ms", 3.42, 3.46, 3.38, 36.76, {}, {}, {}},
                                     {"rigid (noisy surface landmarks)", "-", 0, 0, 0, 0, {}, {}, {}},
@@ -367,8 +529,8 @@ void add_subcommand_demo(CLI::App& app)
             const DatasetState& observed_state = dataset.state(vc.name);
             const LandmarkSet observed = read_landmarks(dataset.path(observed_state.files.at("landmarks_noisy")));
             const LandmarkSet rigid_landmarks = rigid_landmark_registration(rest_landmarks, observed, LandmarkType::surface, vc.name + " (rigid)");
-            const auto record_report = [&](Method& m, const TreReport& r) { (held_out ? m.tre : m.tre_train).push_back(r); };
-            const auto record = [&](Method& m, const LandmarkSet& predicted) { record_report(m, compute_tre(predicted, vc.truth, vc.name)); };
+            const auto record_report = [&](DemoMethod& m, const TreReport& r) { (held_out ? m.tre : m.tre_train).push_back(r); };
+            const auto record = [&](DemoMethod& m, const LandmarkSet& predicted) { record_report(m, compute_tre(predicted, vc.truth, vc.name)); };
             if (held_out) {
                 record(methods[0], homogeneous_landmarks);
                 record(methods[1], run.high_resolution_landmarks);
@@ -381,74 +543,13 @@ void add_subcommand_demo(CLI::App& app)
             record(methods[3], rigid_landmarks);
             record(methods[4], rest_landmarks);
             // Condensed contact along the same tool positions.
-            condensed.reset();
-            for (int s = 1; s <= track_steps; ++s) {
-                const auto up = condensed.move_to(vc.tool, a + (b - a) * double(s) / double(track_steps));
-                if (held_out) methods[5].ms.push_back(up.contact_ms + up.recovery_ms);
-            }
-            record(methods[5], move_landmarks(fine, condensed.query_field_mm(), rest_landmarks));
-            condensed_c2f.reset();
-            for (int s = 1; s <= track_steps; ++s) {
-                const Vec3 at = a + (b - a) * double(s) / double(track_steps);
-                const auto up = condensed_c2f.move_to(vc.tool, at, {"", a, (b - a).normalized(), (at - a).norm()});
-                if (held_out) methods[6].ms.push_back(up.total_ms());
-            }
-            record(methods[6], move_landmarks(fine, condensed_c2f.fine_field_mm(), rest_landmarks));
+            record(methods[5], move_landmarks(fine, follow_condensed(condensed, vc.tool, track_steps, held_out ? &methods[5].ms : nullptr), rest_landmarks));
+            record(methods[6], move_landmarks(fine, follow_condensed(condensed_c2f, vc.tool, track_steps, held_out ? &methods[6].ms : nullptr), rest_landmarks));
             if (!held_out) continue; // timings, outputs and figures: the held-out compressions
             methods[1].ms.insert(methods[1].ms.end(), run.high_resolution_ms.begin(), run.high_resolution_ms.end());
             methods[2].ms.insert(methods[2].ms.end(), run.coarse_to_fine_ms.begin(), run.coarse_to_fine_ms.end());
-            // VTU for ParaView: the fine mesh with both solutions and their difference; the homogeneous one.
-            std::vector<double> difference(run.high_resolution_u.size()), magnitude(fine.mesh.node_count());
-            double largest = 0.0;
-            for (std::size_t k = 0; k < difference.size(); ++k) difference[k] = run.coarse_to_fine_u[k] - run.high_resolution_u[k];
-            for (std::size_t n = 0; n < magnitude.size(); ++n) {
-                magnitude[n] = Vec3(difference[3 * n], difference[3 * n + 1], difference[3 * n + 2]).norm();
-                largest = std::max(largest, magnitude[n]);
-            }
-            MeshData data;
-            data.point_data = {{"displacement_high_resolution", 3, run.high_resolution_u},
-                               {"displacement_coarse_to_fine", 3, run.coarse_to_fine_u},
-                               {"difference_mm", 3, difference},
-                               {"difference_magnitude_mm", 1, magnitude}};
-            write_vtu(dir / "registration" / (vc.name + "_fine.vtu"), fine.mesh, data);
-            MeshData plain_data;
-            plain_data.point_data = {{"displacement", 3, homogeneous_u}};
-            write_vtu(dir / "registration" / (vc.name + "_homogeneous.vtu"), homogeneous.mesh, plain_data);
-            write_landmarks(dir / "registration" / (vc.name + "_landmarks_high_resolution.csv"), run.high_resolution_landmarks);
-            write_landmarks(dir / "registration" / (vc.name + "_landmarks_coarse_to_fine.csv"), run.coarse_to_fine_landmarks);
-            write_landmarks(dir / "registration" / (vc.name + "_landmarks_homogeneous.csv"), homogeneous_landmarks);
-            // Figures: slices through the tool's dent with true (green) and predicted (red) landmarks
-            // (paper 000 figs. 8/9), and the map of |coarse-to-fine − high-resolution| (fig. 11).
-            const DatasetState& state = dataset.state(vc.name);
-            const ScalarImage intensity = read_scalar_image(dataset.path(state.files.at("intensity")));
-            const LabelVolume labels = read_label_volume(dataset.path(state.files.at("labels")));
-            SliceFigureOptions figure;
-            figure.centre = b + vc.tool.radius_mm * (b - a).normalized();
-            figure.pixels_per_mm = o->quick ? 1.0 : 2.0;
-            figure.title = fmt::format("{}: TRUE (GREEN) AND COARSE-TO-FINE (RED) LANDMARKS", vc.name);
-            write_png(dir / "figures" / ("slices_" + vc.name + "_coarse_to_fine.png"),
-                      render_orthogonal_slices(intensity, labels, dataset.roles, vc.truth, run.coarse_to_fine_landmarks, figure).image());
-            figure.title = fmt::format("{}: TRUE (GREEN) AND HIGH-RESOLUTION (RED) LANDMARKS", vc.name);
-            write_png(dir / "figures" / ("slices_" + vc.name + "_high_resolution.png"),
-                      render_orthogonal_slices(intensity, labels, dataset.roles, vc.truth, run.high_resolution_landmarks, figure).image());
-            const ImageGeometry& g = rest_labels.geometry;
-            const SampledField field = sample_displacement_field(fine.mesh, difference, g);
-            ScalarImage heat{g, std::vector<float>(field.inside.size(), std::numeric_limits<float>::quiet_NaN())};
-            for (std::size_t v = 0; v < field.inside.size(); ++v)
-                if (field.inside[v]) heat.values[v] = static_cast<float>(Vec3(field.field.components[3 * v], field.field.components[3 * v + 1], field.field.components[3 * v + 2]).norm());
-            const ScalarImage rest_intensity = read_scalar_image(dataset.path(dataset.state("rest").files.at("intensity")));
-            const LabelVolume rest_label_image = rest_labels;
-            figure.heat = &heat;
-            figure.heat_max = std::max(0.05, std::ceil(largest * 20.0) / 20.0);
-            figure.heat_label = "DIFFERENCE, MM";
-            figure.title = fmt::format("{}: DISPLACEMENT DIFFERENCE, REST CONFIGURATION (MAX {:.2f} MM)", vc.name, largest);
-            write_png(dir / "figures" / ("difference_" + vc.name + ".png"),
-                      render_orthogonal_slices(rest_intensity, rest_label_image, dataset.roles, {}, {}, figure).image());
-            per_state[vc.name] = {{"max_difference_high_resolution_vs_coarse_to_fine_mm", largest},
-                                  {"matched_conditions", run.last_match.conditions.size()},
-                                  {"outside_database_range", run.last_match.outside_range},
-                                  {"nearest_stored_position_mm", run.last_match.nearest_position_mm},
-                                  {"detail_share", run.last_match.detail}};
+            per_state[vc.name] = write_held_out_outputs(dir, dataset, vc, fine, homogeneous, run, homogeneous_u, homogeneous_landmarks, rest_labels,
+                                                        o->quick ? 1.0 : 2.0);
         }
         bar.finish();
         const double registration_s = seconds_since(t);
@@ -462,24 +563,8 @@ void add_subcommand_demo(CLI::App& app)
         write_png(dir / "figures" / "tre.png", render_tre_chart(series, "TRE ON HELD-OUT COMPRESSIONS D, E"));
 
         step(7, "summary");
-        json table = json::array();
-        std::string text = fmt::format("\nphysreg demo — {} phantom (body ground truth: gel, tetrahedra, Mooney-Rivlin, unknown moduli), "
-                                       "{} landmarks per compression, {} threads\n\n", preset, rest_landmarks.size(), omp_get_max_threads());
-        text += fmt::format("{:<34}{:>28}{:>28}{:>10}   {}\n", "method", "training A,B,C: all/surf/int", "held-out D,E: all/surf/int", "ms/update",
-                            "paper 000 (all/surface/internal, time)");
-        for (const auto& m : methods) {
-            const TreReport r = pool_tre(m.tre), rt = pool_tre(m.tre_train);
-            const double ms = m.ms.empty() ? 0.0 : std::accumulate(m.ms.begin(), m.ms.end(), 0.0) / double(m.ms.size());
-            text += fmt::format("{:<34}{:>9.2f} /{:>6.2f} /{:>6.2f} mm{:>9.2f} /{:>6.2f} /{:>6.2f} mm{:>10}   {}\n", m.name, rt.all.mean_mm,
-                                rt.surface.mean_mm, rt.internal.mean_mm, r.all.mean_mm, r.surface.mean_mm, r.internal.mean_mm,
-                                m.ms.empty() ? std::string("-") : (ms < 10 ? fmt::format("{:.2f}", ms) : fmt::format("{:.1f}", ms)), m.paper);
-            json row = {{"method", m.name}, {"tre_held_out", json::parse(tre_stats_json(r))}, {"tre_training", json::parse(tre_stats_json(rt))}};
-            if (!m.ms.empty()) row["ms_per_update"] = ms;
-            if (m.paper_all > 0)
-                row["paper_000"] = {{"tre_all_mm", m.paper_all}, {"tre_surface_mm", m.paper_surface}, {"tre_internal_mm", m.paper_internal}, {"ms_per_frame", m.paper_ms}};
-            table.push_back(row);
-        }
-        text += "(rigid: fitted to the 11 noisy surface landmarks of each state, so its surface TRE is a fit residual)\n";
+        json table;
+        std::string text = demo_table(methods, preset, rest_landmarks.size(), table);
         const double total_s = seconds_since(start);
         text += fmt::format("\n{} model, {}x{}x{} cells (coarse {}x{}x{}); fitted k_c,s-t = {:.4g} N/m, k_c,s-v = {:.4g} N/m (paper 000: 600, 500), "
                             "gel E {:.4g} Pa (start 1e5){}; training TRE {:.3f} mm (paper 2.00), validation {:.3f} mm (paper 2.55)\n",
@@ -494,28 +579,9 @@ void add_subcommand_demo(CLI::App& app)
                             reuse ? " (reused)" : "", estimate_s, database_s, registration_s, total_s);
         text += fmt::format("outputs in '{}': registration/*.vtu (ParaView), figures/*.png, params.json, enrichment.phe, phantom/ (3D Slicer: "
                             "images, fields, landmarks)\n", target.string());
-        json summary = {{"preset", preset},
-                        {"seed", o->seed},
-                        {"methods", table},
-                        {"fitted", to_json(fit.fitted)},
-                        // The optimiser's start: a fitted value equal to it was not moved by the data.
-                        {"fit_start", fit.history.empty() ? json(nullptr) : to_json(fit.history.front().parameters)},
-                        {"fit_at_bound", fit.at_bound},
-                        {"fit_identifiability", [&] {
-                             json j = json::object();
-                             for (const auto& s : fit.sensitivity)
-                                 j[s.parameter] = {{"objective_change_mm_per_decade", s.mm_per_decade}, {"identifiable", s.identifiable}};
-                             return j;
-                         }()},
-                        {"train_tre", json::parse(tre_stats_json(fit.train_pooled))},
-                        {"validation_tre", json::parse(tre_stats_json(pool_tre(methods[1].tre)))},
-                        {"validation_landmarks_at_rest", json::parse(tre_stats_json(pool_tre(methods[4].tre)))},
-                        {"database", {{"conditions", db.conditions.size()}, {"bytes", database_bytes}, {"blend", blend},
-                                      {"detail_length_mm", std::isinf(detail_length) ? json("inf") : json(detail_length)}}},
-                        {"per_state", per_state},
-                        {"meshing_blocks", blocks},
-                        {"seconds", {{"phantom", phantom_s}, {"phantom_reused", reuse}, {"estimation", estimate_s}, {"database", database_s},
-                                     {"registration", registration_s}, {"total", total_s}}}};
+        const json summary = demo_summary(preset, o->seed, table, fit, methods, db, database_bytes, blend, detail_length, per_state, blocks,
+                                          {{"phantom", phantom_s}, {"phantom_reused", reuse}, {"estimation", estimate_s}, {"database", database_s},
+                                           {"registration", registration_s}, {"total", total_s}});
         write_atomically(dir / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });
         write_html_report(dir, target);
         staging.commit();
