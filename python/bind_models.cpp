@@ -66,9 +66,40 @@ py::array_t<std::int32_t> triangles_array(const LabelledTriangles& surface)
     return t;
 }
 
-} // namespace
+struct SurfaceRegistration {
+    VolumeMesh mesh;
+    SurfaceRegistrationResult result;
+};
 
-void bind_models(py::module_& m)
+// The dense field and the mapped points of any registration result (mesh at rest + nodal displacement).
+py::tuple dense_field(const VolumeMesh& mesh, const std::vector<double>& u, std::optional<ImageGeometry> geometry, double spacing_mm)
+{
+    if (!(spacing_mm > 0) || !std::isfinite(spacing_mm)) throw py::value_error(fmt::format("spacing_mm: {} must be a positive number", spacing_mm));
+    const ImageGeometry g = geometry ? *geometry : image_grid_over_mesh(mesh, spacing_mm, 2 * spacing_mm);
+    DisplacementField f;
+    {
+        py::gil_scoped_release release;
+        f = sample_displacement_field(mesh, u, g).field;
+    }
+    const ImageGeometry fg = f.geometry;
+    return py::make_tuple(image_array(std::move(f), &DisplacementField::components, 3), fg);
+}
+
+py::array_t<double> mapped_points(const VolumeMesh& mesh, const std::vector<double>& u, const py::array& points, double max_distance_mm)
+{
+    const std::vector<Vec3> p = points_from(points, "points");
+    LandmarkSet set(p.size());
+    for (std::size_t n = 0; n < p.size(); ++n) set[n] = {std::to_string(n + 1), p[n], LandmarkType::unspecified};
+    const auto where = embed_landmarks(mesh, set, max_distance_mm, "points");
+    const LandmarkSet moved = displace_landmarks(mesh, where, set, u);
+    py::array_t<double> out({static_cast<py::ssize_t>(moved.size()), py::ssize_t{3}});
+    for (std::size_t n = 0; n < moved.size(); ++n)
+        for (int a = 0; a < 3; ++a) out.mutable_at(static_cast<py::ssize_t>(n), a) = moved[n].position[a];
+    return out;
+}
+
+/// Paper 001 in memory: SurfaceModel, register_surface_cloud and its result.
+void bind_surface_model(py::module_& m)
 {
     // ---- in memory (issue 29): paper 001's registration of a model to a cloud held in numpy arrays ----
     py::class_<SurfaceModel>(m, "SurfaceModel",
@@ -114,33 +145,6 @@ void bind_models(py::module_& m)
             return fmt::format("SurfaceModel({} nodes, {} tetrahedra, {} surface triangles)", model.mesh.node_count(), model.mesh.cell_count(), model.surface.triangles.size());
         });
 
-    struct SurfaceRegistration {
-        VolumeMesh mesh;
-        SurfaceRegistrationResult result;
-    };
-    // The dense field and the mapped points of any registration result (mesh at rest + nodal displacement).
-    const auto dense_field = [](const VolumeMesh& mesh, const std::vector<double>& u, std::optional<ImageGeometry> geometry, double spacing_mm) {
-        if (!(spacing_mm > 0) || !std::isfinite(spacing_mm)) throw py::value_error(fmt::format("spacing_mm: {} must be a positive number", spacing_mm));
-        const ImageGeometry g = geometry ? *geometry : image_grid_over_mesh(mesh, spacing_mm, 2 * spacing_mm);
-        DisplacementField f;
-        {
-            py::gil_scoped_release release;
-            f = sample_displacement_field(mesh, u, g).field;
-        }
-        const ImageGeometry fg = f.geometry;
-        return py::make_tuple(image_array(std::move(f), &DisplacementField::components, 3), fg);
-    };
-    const auto mapped_points = [](const VolumeMesh& mesh, const std::vector<double>& u, const py::array& points, double max_distance_mm) {
-        const std::vector<Vec3> p = points_from(points, "points");
-        LandmarkSet set(p.size());
-        for (std::size_t n = 0; n < p.size(); ++n) set[n] = {std::to_string(n + 1), p[n], LandmarkType::unspecified};
-        const auto where = embed_landmarks(mesh, set, max_distance_mm, "points");
-        const LandmarkSet moved = displace_landmarks(mesh, where, set, u);
-        py::array_t<double> out({static_cast<py::ssize_t>(moved.size()), py::ssize_t{3}});
-        for (std::size_t n = 0; n < moved.size(); ++n)
-            for (int a = 0; a < 3; ++a) out.mutable_at(static_cast<py::ssize_t>(n), a) = moved[n].position[a];
-        return out;
-    };
     py::class_<SurfaceRegistration>(m, "SurfaceRegistration", "The result of register_surface_cloud: the model's nodal displacement and its dense field.")
         .def_property_readonly("displacement", [](py::object self) {
             auto& r = self.cast<SurfaceRegistration&>().result;
@@ -164,12 +168,12 @@ void bind_models(py::module_& m)
             }
             return out;
         }, "Per annealing plateau: steps, whether it settled, pairs kept, their mean distance (mm), stiffness per label (N).")
-        .def("field", [dense_field](const SurfaceRegistration& r, std::optional<ImageGeometry> geometry, double spacing_mm) {
+        .def("field", [](const SurfaceRegistration& r, std::optional<ImageGeometry> geometry, double spacing_mm) {
             return dense_field(r.mesh, r.result.displacement_mm, geometry, spacing_mm);
         }, py::arg("geometry") = py::none(), py::arg("spacing_mm") = 2.0,
            "The dense field (float32 [z, y, x, 3], mm, LPS; 0 outside the model) on `geometry`, or on a grid of spacing_mm over the model "
            "with a 2-voxel margin (as register-surface writes displacement.nii.gz) → (array, ImageGeometry).")
-        .def("map_points", [mapped_points](const SurfaceRegistration& r, const py::array& points, double max_distance_mm) {
+        .def("map_points", [](const SurfaceRegistration& r, const py::array& points, double max_distance_mm) {
             return mapped_points(r.mesh, r.result.displacement_mm, points, max_distance_mm);
         }, py::arg("points"), py::arg("max_distance_mm") = 10.5,
            "Rest positions (N, 3) mm (targets, landmarks) carried by the model's displacement; a point farther than max_distance_mm "
@@ -201,6 +205,11 @@ void bind_models(py::module_& m)
           "backward Euler, arctan pair forces annealed over paper 001's schedules, the posterior surface held). progress(fraction, "
           "message) after every plateau. Returns a SurfaceRegistration.");
 
+}
+
+/// The one model of the three modes and its observations: Model, Tool, Cloud, Segmentation.
+void bind_model_and_observations(py::module_& m)
+{
     // ---- one model for the three modes (issue 29): Model, observations, register --------------------
     py::class_<Model>(m, "Model",
                       "One model for the three registration modes: a mesh (tetrahedra or hexahedra), a tissue per cell label (Young's "
@@ -308,6 +317,11 @@ void bind_models(py::module_& m)
         .def(py::init([](const py::array& labels, const ImageGeometry& geometry) { return SegmentationObservation{label_volume_from(labels, geometry)}; }),
              py::arg("labels"), py::arg("geometry"));
 
+}
+
+/// physreg.register and its Registration result.
+void bind_register(py::module_& m)
+{
     struct Registration {
         VolumeMesh mesh;
         ModelRegistration result;
@@ -322,7 +336,7 @@ void bind_models(py::module_& m)
             return py::array_t<double>({static_cast<py::ssize_t>(u.size() / 3), py::ssize_t{3}}, u.data(), self);
         }, "(N, 3) float64 nodal displacement, mm (a view)")
         .def_property_readonly("mesh", [](const Registration& r) { return r.mesh; }, "The model's mesh at rest (a copy).")
-        .def("field", [dense_field](const Registration& r, std::optional<ImageGeometry> geometry, double spacing_mm) {
+        .def("field", [](const Registration& r, std::optional<ImageGeometry> geometry, double spacing_mm) {
             return dense_field(r.mesh, r.result.displacement_mm, geometry, spacing_mm);
         }, py::arg("geometry") = py::none(), py::arg("spacing_mm") = 2.0,
            "The dense field (float32 [z, y, x, 3], mm, LPS; 0 outside the model) on `geometry`, or on a grid of spacing_mm over the model → (array, ImageGeometry).")
@@ -366,6 +380,15 @@ void bind_models(py::module_& m)
 
     bind_pipelines(m);
     bind_compression(m);
+}
+
+} // namespace
+
+void bind_models(py::module_& m)
+{
+    bind_surface_model(m);
+    bind_model_and_observations(m);
+    bind_register(m);
 }
 
 } // namespace physreg::python

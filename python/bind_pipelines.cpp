@@ -20,7 +20,10 @@
 
 namespace physreg::python {
 
-void bind_pipelines(py::module_& m)
+namespace {
+
+/// Paper 002's pipeline: ImagePair, register_image_pair and its result.
+void bind_image_pipeline(py::module_& m)
 {
     py::class_<ImagePair>(m, "ImagePair",
                           "Paper 002's input: a fixed (intra-operative) image and segmentation, a moving (pre-operative) image and "
@@ -104,6 +107,11 @@ void bind_pipelines(py::module_& m)
           "load and moduli by L-BFGS with adjoint gradients, ITK baselines, evaluation. settings: a dict of physreg.settings_spec('register-images') "
           "keys; keyword arguments override it (e.g. cycles=4). Returns an ImageRegistration.");
 
+}
+
+/// Paper 001's pipeline: PartialSurfaceCase, register_partial_surface and its result.
+void bind_surface_pipeline(py::module_& m)
+{
     // ---- paper 001 ---------------------------------------------------------------------------------
     py::class_<PartialSurfaceCase>(m, "PartialSurfaceCase",
                                    "Paper 001's input: a tetrahedral liver model with a labelled surface, an intra-operative cloud, and "
@@ -188,6 +196,14 @@ void bind_pipelines(py::module_& m)
           "(annealed arctan pair forces, co-rotational backward Euler), the adjoint method when asked, evaluation and the determinacy check. "
           "settings: a dict of physreg.settings_spec('register-surface') keys; keyword arguments override it. Returns a PartialSurfaceRegistration.");
 
+}
+
+} // namespace
+
+void bind_pipelines(py::module_& m)
+{
+    bind_image_pipeline(m);
+    bind_surface_pipeline(m);
     m.def("settings_spec", [](const std::string& mode) {
         if (mode == "register-images") return to_python(image_registration_spec().describe());
         if (mode == "register-surface") return to_python(partial_surface_spec().describe());
