@@ -178,6 +178,44 @@ output: {directory: out}
     if database:
         put("enrichment_database", "tiny.phe", pathlib.Path(database).read_bytes())
 
+    igtl_seeds()
+
+
+def igtl_seeds():
+    """OpenIGTLink messages as a tracker, Slicer or a cloud source sends them (selector 1: the target
+    writes the CRC in; 0: as given, with a correct CRC here too)."""
+    import struct
+    table = []
+    for i in range(256):
+        c = i << 56
+        for _ in range(8):
+            c = ((c << 1) ^ 0x42F0E1EBA9EA3693) if c & (1 << 63) else (c << 1)
+            c &= 0xFFFFFFFFFFFFFFFF
+        table.append(c)
+
+    def crc64(data):
+        c = 0
+        for b in data:
+            c = table[((c >> 56) ^ b) & 0xFF] ^ ((c << 8) & 0xFFFFFFFFFFFFFFFF)
+        return c
+
+    def message(kind, device, body, version=1):
+        return struct.pack(">H12s20sQQQ", version, kind.encode(), device.encode(), 1 << 32, len(body), crc64(body)) + body
+
+    transform = struct.pack(">12f", 1, 0, 0, 0, 1, 0, 0, 0, 1, -10.5, 20.0, 35.25)
+    put("igtl_message", "transform_v1.bin", message("TRANSFORM", "tool", transform), 0)
+    extended = struct.pack(">HHIQ", 12, 2, 0, 0)  # extended header: size, metadata header size, metadata size, message id
+    put("igtl_message", "transform_v2.bin", message("TRANSFORM", "tool", extended + transform + struct.pack(">H", 0), version=2), 1)
+    put("igtl_message", "status_v2.bin", message("STATUS", "Slicer", extended + struct.pack(">HQ20s", 1, 0, b"") + b"\0" + struct.pack(">H", 0), 2), 1)
+    xml = b'<Command Name="status" />'
+    put("igtl_message", "command.bin", message("STRING", "CMD_1", struct.pack(">HH", 3, len(xml)) + xml), 0)
+    points = [(0.0, 1.0, 2.0), (10.5, -3.0, 7.25), (-4.0, 8.0, 1.0)]
+    polydata = struct.pack(">10I", len(points), 0, 0, 0, 0, 0, 0, 0, 0, 0) + b"".join(struct.pack(">3f", *p) for p in points)
+    put("igtl_message", "cloud.bin", message("POLYDATA", "cloud", polydata), 1)
+    # A 3 × 2 × 2 uint8 segmentation, RAS, 1.5 mm voxels, centred at (10, -5, 20).
+    image = struct.pack(">HBBBB3H12f3H3H", 1, 1, 3, 1, 1, 3, 2, 2, 1.5, 0, 0, 0, 1.5, 0, 0, 0, 1.5, 10, -5, 20, 0, 0, 0, 3, 2, 2)
+    put("igtl_message", "segmentation.bin", message("IMAGE", "segmentation", image + bytes([0, 1, 1, 2, 0, 1, 1, 1, 0, 0, 2, 1])), 1)
+
 
 if __name__ == "__main__":
     main()

@@ -41,6 +41,7 @@ parser.add_argument("--physreg", default=os.path.join(ROOT, "build", "bin", "phy
 parser.add_argument("--cases", type=int, default=60)
 parser.add_argument("--seed", type=int, default=46)
 parser.add_argument("--no-docs", action="store_true")
+parser.add_argument("--only", default="", help="run only these cases (c11,c12,…): the same draws, the others skipped (phantoms cached in WORK_DIR/phantoms)")
 parser.add_argument("--report-only", action="store_true", help="redraw the tables and figure from WORK_DIR/study.json (cases run so far)")
 args = parser.parse_args()
 os.makedirs(args.work, exist_ok=True)
@@ -200,6 +201,9 @@ while not args.report_only and len(cases) < args.cases and attempts < 4 * args.c
         continue
     out = os.path.join(args.work, "cases", name)
     case_rng = random.Random(rng.randrange(1 << 30))
+    if args.only and name not in args.only.split(","):
+        cases.append({"name": name, "skipped": True})  # keeps the numbering of the draws
+        continue
     points, visible = make_inputs(folder, manifest, state, cloud_kind, visible, rotation(angle, axis), case_rng, os.path.join(out, "inputs"))
     result = os.path.join(out, "result")
     t0 = time.time()
@@ -229,6 +233,7 @@ while not args.report_only and len(cases) < args.cases and attempts < 4 * args.c
 
 # ---- the figures the issue asks for --------------------------------------------------------------
 
+cases = [c for c in cases if not c.get("skipped")]
 ok = [c for c in cases if c["exit"] == 0]
 flagged = lambda c: bool(c["flags"]) or any("do not decide" in n or "contradict" in n for n in c["notes"])  # noqa: E731
 worse = [c for c in ok if c["answer_mm"] > c["at_rest_mm"]]

@@ -107,28 +107,6 @@ std::vector<Scheduled> from_dataset(const std::string& directory, const std::str
     return out;
 }
 
-int connect_to(const std::string& target)
-{
-    const auto colon = target.rfind(':');
-    if (colon == std::string::npos) fail("--to '{}': give HOST:PORT", target);
-    const std::string host = target.substr(0, colon), port = target.substr(colon + 1);
-    addrinfo hints{};
-    hints.ai_family = AF_INET;
-    hints.ai_socktype = SOCK_STREAM;
-    addrinfo* found = nullptr;
-    if (::getaddrinfo(host.c_str(), port.c_str(), &hints, &found) != 0 || !found) fail("--to '{}': host or port unknown", target);
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    const int ok = fd >= 0 ? ::connect(fd, found->ai_addr, found->ai_addrlen) : -1;
-    ::freeaddrinfo(found);
-    if (ok != 0) {
-        if (fd >= 0) ::close(fd);
-        fail("--to '{}': cannot connect: {}", target, std::strerror(errno));
-    }
-    const int yes = 1;
-    ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
-    return fd;
-}
-
 } // namespace
 
 void add_subcommand_replay(CLI::App& app)
@@ -163,7 +141,7 @@ void add_subcommand_replay(CLI::App& app)
         if (!o->output.empty()) check_output_path(o->output, "--output");
         const auto session = o->recording.empty() ? from_dataset(o->dataset, o->states, o->steps, o->rate, o->tool, o->frame == "ras" ? -1.0 : 1.0)
                                                   : from_recording(o->recording);
-        Descriptor server(connect_to(o->to));
+        Descriptor server(connect_to(o->to, "--to"));
         using clock = std::chrono::steady_clock;
         const auto start = clock::now();
         const auto since = [&] { return std::chrono::duration<double>(clock::now() - start).count(); };

@@ -6,9 +6,13 @@
 #include <igtl_util.h>
 
 #include <poll.h>
+#include <netinet/tcp.h>
+#include <netinet/in.h>
+#include <netdb.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstring>
 
 namespace physreg::cli {
@@ -150,6 +154,98 @@ std::vector<std::uint8_t> from_hex(const std::string& text, const std::string& w
 Descriptor::~Descriptor()
 {
     if (m_fd >= 0) ::close(m_fd);
+}
+
+int connect_to(const std::string& target, const std::string& option)
+{
+    const auto colon = target.rfind(':');
+    if (colon == std::string::npos) fail("{} '{}': give HOST:PORT", option, target);
+    const std::string host = target.substr(0, colon), port = target.substr(colon + 1);
+    addrinfo hints{};
+    hints.ai_family = AF_INET;
+    hints.ai_socktype = SOCK_STREAM;
+    addrinfo* found = nullptr;
+    if (::getaddrinfo(host.c_str(), port.c_str(), &hints, &found) != 0 || !found) fail("{} '{}': host or port unknown", option, target);
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    const int ok = fd >= 0 ? ::connect(fd, found->ai_addr, found->ai_addrlen) : -1;
+    ::freeaddrinfo(found);
+    if (ok != 0) {
+        if (fd >= 0) ::close(fd);
+        fail("{} '{}': cannot connect: {}", option, target, std::strerror(errno));
+    }
+    const int yes = 1;
+    ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+    return fd;
+}
+
+
+/// The points of a POLYDATA message's content (its header: ten uint32 counts and sizes, then the
+/// points as big-endian float32 triples); `wire` −1 turns RAS into LPS. Error naming the device.
+std::vector<Vec3> polydata_points(const IgtlMessage& m, double wire)
+{
+    if (m.content.size() < 40) fail("OpenIGTLink: POLYDATA '{}' shorter than its header", m.device);
+    const std::uint64_t n = read_be(m.content.data(), 4);
+    if (40 + 12 * n > m.content.size()) fail("OpenIGTLink: POLYDATA '{}' announces {} points in {} bytes", m.device, n, m.content.size());
+    std::vector<Vec3> points(n);
+    for (std::uint64_t i = 0; i < n; ++i) {
+        const std::uint8_t* p = m.content.data() + 40 + 12 * i;
+        points[i] = Vec3(wire * read_float_be(p), wire * read_float_be(p + 4), read_float_be(p + 8));
+        if (!points[i].allFinite()) fail("OpenIGTLink: POLYDATA '{}': point {} is not finite", m.device, i);
+    }
+    return points;
+}
+
+LabelVolume igtl_image_labels(const IgtlMessage& m)
+{
+    const auto& c = m.content;
+    if (c.size() < 72) fail("OpenIGTLink: IMAGE '{}' shorter than its 72-byte header", m.device);
+    const int components = c[2], scalar = c[3], endian = c[4], frame = c[5];
+    if (components != 1) fail("OpenIGTLink: IMAGE '{}' has {} components per voxel; labels have one", m.device, components);
+    if (scalar != 2 && scalar != 3 && scalar != 4 && scalar != 5)
+        fail("OpenIGTLink: IMAGE '{}': scalar type {} is not a label type (8- or 16-bit integers)", m.device, scalar);
+    if (endian != 1 && endian != 2) fail("OpenIGTLink: IMAGE '{}': endianness {} (1 big, 2 little)", m.device, endian);
+    if (frame != 1 && frame != 2) fail("OpenIGTLink: IMAGE '{}': coordinate frame {} (1 RAS, 2 LPS)", m.device, frame);
+    LabelVolume v;
+    auto& g = v.geometry;
+    for (int a = 0; a < 3; ++a) {
+        g.size[a] = static_cast<std::int64_t>(read_be(c.data() + 6 + 2 * a, 2));
+        if (g.size[a] == 0) fail("OpenIGTLink: IMAGE '{}' has no voxel along axis {}", m.device, a);
+        if (read_be(c.data() + 60 + 2 * a, 2) != 0 || static_cast<std::int64_t>(read_be(c.data() + 66 + 2 * a, 2)) != g.size[a])
+            fail("OpenIGTLink: IMAGE '{}' is a sub-volume; send the whole segmentation", m.device);
+    }
+    // Columns t, s, n (the axes times the spacing) and the centre p, RAS or LPS; to LPS.
+    const double flip = frame == 1 ? -1.0 : 1.0;
+    Mat3 axes;
+    Vec3 centre;
+    for (int col = 0; col < 4; ++col)
+        for (int row = 0; row < 3; ++row) {
+            const double value = (row < 2 ? flip : 1.0) * read_float_be(c.data() + 12 + 4 * (3 * col + row));
+            if (!std::isfinite(value)) fail("OpenIGTLink: IMAGE '{}': its matrix is not finite", m.device);
+            if (col < 3) axes(row, col) = value;
+            else centre[row] = value;
+        }
+    for (int a = 0; a < 3; ++a) {
+        g.spacing[a] = axes.col(a).norm();
+        if (!(g.spacing[a] > 0)) fail("OpenIGTLink: IMAGE '{}': axis {} has zero length", m.device, a);
+        g.direction.col(a) = axes.col(a) / g.spacing[a];
+    }
+    if ((g.direction.transpose() * g.direction - Mat3::Identity()).cwiseAbs().maxCoeff() > 1e-3)
+        fail("OpenIGTLink: IMAGE '{}': its axes are not orthonormal", m.device);
+    g.origin = centre;
+    for (int a = 0; a < 3; ++a) g.origin -= g.direction.col(a) * (g.spacing[a] * 0.5 * static_cast<double>(g.size[a] - 1));
+    const std::size_t bytes = scalar <= 3 ? 1 : 2;
+    const std::size_t voxels = static_cast<std::size_t>(g.size[0] * g.size[1] * g.size[2]);
+    if (c.size() != 72 + voxels * bytes)
+        fail("OpenIGTLink: IMAGE '{}' of {}×{}×{} voxels holds {} bytes of pixels, not {}", m.device, g.size[0], g.size[1], g.size[2], c.size() - 72, voxels * bytes);
+    v.labels.resize(voxels);
+    const std::uint8_t* p = c.data() + 72;
+    for (std::size_t i = 0; i < voxels; ++i) {
+        std::uint32_t value = bytes == 1 ? p[i] : endian == 1 ? (std::uint32_t(p[2 * i]) << 8 | p[2 * i + 1]) : (std::uint32_t(p[2 * i + 1]) << 8 | p[2 * i]);
+        const bool negative = (scalar == 2 && value >= 0x80) || (scalar == 4 && value >= 0x8000);
+        if (negative) fail("OpenIGTLink: IMAGE '{}': voxel {} holds a negative label", m.device, i);
+        v.labels[i] = static_cast<std::uint16_t>(value);
+    }
+    return v;
 }
 
 } // namespace physreg::cli

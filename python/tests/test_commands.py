@@ -67,7 +67,14 @@ def test_register_images_biomechanical_with_label_baselines(dataset, tmp_path):
     expected = {"at_rest", "biomechanical", "rigid_labels", "demons_labels", "bspline_labels"} | ({"initial_alignment"} if a["applied"] else set())
     assert set(summary["methods"]) == expected
     assert all(m["status"] == "ok" for m in summary["methods"].values())
-    assert "dice" in json.dumps(summary["methods"]["biomechanical"]).lower()
+    # This pair (the insufflation) barely moves the labels: at rest every Dice is already 1 and the
+    # landmarks move 0.25 mm. What can fail here is a registration that makes it worse; accuracy
+    # itself is checked on the push (test_image_pipeline.py, test_cli.sh: TRE <= 0.7x at rest).
+    bio, rest = summary["methods"]["biomechanical"], summary["methods"]["at_rest"]
+    assert set(bio["dice"]) == set(rest["dice"]) and len(bio["dice"]) >= 2
+    for label, d in bio["dice"].items():
+        assert d >= rest["dice"][label] - 0.01, (label, bio["dice"], rest["dice"])
+    assert bio["tre"]["all"]["mean_mm"] <= rest["tre"]["all"]["mean_mm"] + 0.05, (bio["tre"]["all"], rest["tre"]["all"])
     assert all(e > 0 for e in summary["estimated_moduli_pa"].values())
     u, g = physreg.read_displacement_field(tmp_path / "ri" / "displacement.nii.gz")
     assert u.shape[-1] == 3 and np.isfinite(u).all()

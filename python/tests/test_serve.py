@@ -171,9 +171,51 @@ def test_a_corrupt_message_stops_the_server_with_a_clear_error(dataset, program)
     assert "TRANSFORM message 'tool': CRC mismatch" in p.stderr.read()
 
 
+def test_client_mode_connects_to_a_tracker_server_and_follows_its_poses(dataset, program):
+    """--client HOST:PORT: physreg connects to a PlusServer-like server (written here) that streams
+    the tracker's poses; the answers come back on the same connection, and the session ends when
+    the server closes it."""
+    if not program:
+        skip_or_fail("the physreg program is needed to run the server")
+    with socket.socket() as plus:
+        plus.bind(("127.0.0.1", 0))
+        plus.listen(1)
+        port = plus.getsockname()[1]
+        p = subprocess.Popen([program, "--log-level", "warn", "serve", "--dataset", str(dataset), "--grid", GRID, "--client", f"127.0.0.1:{port}"],
+                             stderr=subprocess.PIPE, text=True)
+        assert "connecting to 127.0.0.1:" in p.stderr.readline()
+        plus.settimeout(120)
+        sock, _ = plus.accept()
+        with sock:
+            sock.settimeout(60)
+            lps = final_pose_lps(dataset, "A")
+            sock.sendall(transform((-lps[0], -lps[1], lps[2]), timestamp=42))
+            kinds = []
+            while True:
+                kind, device, stamp, body = read_message(sock)
+                assert stamp == 42
+                kinds.append(kind)
+                if kind == "POINT":
+                    served = targets_from(body)
+                    break
+        p.wait(timeout=60)
+    assert p.returncode == 0, p.stderr.read()
+    assert "POLYDATA" in kinds and len(served) == 25
+    subject = physreg.CompressionSubject.from_dataset(dataset, grid=GRID)
+    r = physreg.predict_compression(subject, physreg.CompressionCase.from_dataset(dataset, "A"), solver="condensed")
+    worst = max(np.linalg.norm(np.array([-served[n][0], -served[n][1], served[n][2]]) - np.array(q)) for n, q in r.landmarks.items())
+    assert worst < 0.01, worst  # mm: the listening server's answer for the same pose
+
+
 def test_impossible_options_are_refused(dataset, program):
     if not program:
         skip_or_fail("the physreg program is needed")
+    r = subprocess.run([program, "serve", "--dataset", str(dataset)], capture_output=True, text=True)
+    assert r.returncode == 1 and "give --port (listen) or --client HOST:PORT" in r.stderr, r.stderr
+    r = subprocess.run([program, "serve", "--dataset", str(dataset), "--port", "18945", "--client", "127.0.0.1:18944"], capture_output=True, text=True)
+    assert r.returncode == 1 and "not both" in r.stderr, r.stderr
+    r = subprocess.run([program, "serve", "--dataset", str(dataset), "--client", "localhost"], capture_output=True, text=True)
+    assert r.returncode == 1 and "--client 'localhost': give HOST:PORT" in r.stderr, r.stderr
     r = subprocess.run([program, "serve", "--dataset", str(dataset), "--port", "70000"], capture_output=True, text=True)
     assert r.returncode == 1 and "--port 70000 must lie in 1 … 65535" in r.stderr
     r = subprocess.run([program, "serve", "--dataset", str(dataset), "--port", "18945", "--frame", "xyz"], capture_output=True, text=True)
@@ -260,3 +302,75 @@ def test_a_cloud_is_registered_in_the_background_while_the_tool_is_followed(data
     assert len(served) == len(r.landmarks) == 25
     worst = max(np.linalg.norm(np.array([-served[n][0], -served[n][1], served[n][2]]) - np.array(x)) for n, x in r.landmarks.items())
     assert worst < 0.01, worst  # mm: float32 on the wire
+
+
+def image_message(device, labels, geometry, timestamp):
+    """IMAGE (uint8 or uint16 labels [z, y, x]) in RAS: the matrix columns are the axes times the
+    spacing, its translation the volume's centre (OpenIGTLink's convention)."""
+    direction = np.array(geometry.direction, dtype=float).reshape(3, 3)
+    spacing = np.array(geometry.spacing, dtype=float)
+    size = np.array(geometry.size)
+    columns = direction * spacing  # LPS
+    centre = np.array(geometry.origin, dtype=float) + columns @ ((size - 1) / 2.0)
+    to_ras = np.diag([-1.0, -1.0, 1.0])
+    columns, centre = to_ras @ columns, to_ras @ centre
+    wide = labels.max() > 255
+    header = struct.pack(">HBBBB3H", 1, 1, 5 if wide else 3, 1, 1, *(int(v) for v in size))
+    header += struct.pack(">12f", *columns[:, 0], *columns[:, 1], *columns[:, 2], *centre)
+    header += struct.pack(">3H3H", 0, 0, 0, *(int(v) for v in size))
+    pixels = labels.astype(">u2" if wide else "u1").tobytes()
+    return message("IMAGE", device, header + pixels, timestamp)
+
+
+def test_a_segmentation_is_registered_in_the_background(dataset, program):
+    """An intra-operative segmentation (IMAGE): paper 002's pipeline registers the subject's rest
+    labels to it in the background; the organ surfaces and the targets come back stamped with the
+    image's timestamp. Sent the rest labels themselves, the targets must stay where they are: a
+    wrong reading of the wire's frame (RAS, the volume's centre as origin, the spacing in the
+    matrix) would shift the image and every target with it."""
+    if not program:
+        skip_or_fail("the physreg program is needed to run the server")
+    manifest = json.loads((dataset / "manifest.json").read_text())
+    rest = next(s for s in manifest["states"] if s["name"] == "rest")
+    labels, geometry = physreg.read_labels(dataset / rest["files"]["labels"])
+    names, positions, _ = physreg.read_landmarks(dataset / rest["files"]["landmarks"])
+    p, port = start_server(dataset, program)
+    with socket.create_connection(("127.0.0.1", port), timeout=600) as sock:
+        sock.sendall(image_message("segmentation", labels, geometry, 777))
+        surfaces, targets = {}, None
+        while targets is None:
+            kind, device, stamp, body = read_message(sock)
+            assert stamp == 777, (kind, device, stamp)
+            assert kind != "STATUS", body
+            if kind == "POLYDATA":
+                surfaces[device] = struct.unpack(">10I", body[:40])
+            elif (kind, device) == ("POINT", "targets_segmentation"):
+                targets = targets_from(body)
+    p.wait(timeout=120)
+    assert p.returncode == 0, p.stderr.read()
+    assert "liver_segmentation" in surfaces and surfaces["liver_segmentation"][0] > 100, surfaces.keys()
+    assert sorted(targets) == sorted(names)
+    moved = [np.linalg.norm(np.array([-targets[n][0], -targets[n][1], targets[n][2]]) - positions[i]) for i, n in enumerate(names)]
+    assert max(moved) < 0.3, max(moved)  # mm
+
+
+def test_a_segmentation_that_is_not_labels_is_refused_on_the_wire(dataset, program):
+    """A grey-level IMAGE under the segmentation's name is the client's bad input: a STATUS says why,
+    and the session goes on (the next command is answered)."""
+    if not program:
+        skip_or_fail("the physreg program is needed to run the server")
+    p, port = start_server(dataset, program)
+    labels = np.zeros((2, 2, 2), dtype=np.uint8)
+    bad = bytearray(image_message("segmentation", labels, physreg.ImageGeometry(spacing=(2.0, 2.0, 2.0)), 9))
+    bad[58 + 3] = 10  # scalar type float32: not labels
+    bad = bytes(bad[:50]) + struct.pack(">Q", crc64(bytes(bad[58:]))) + bytes(bad[58:])
+    with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
+        sock.sendall(bad)
+        kind, device, stamp, body = read_message(sock)
+        assert (kind, device, stamp) == ("STATUS", "segmentation", 9)
+        assert b"scalar type 10 is not a label type" in body, body
+        sock.sendall(command("CMD_3", '<Command Name="status" />', 10))
+        kind, device, stamp, body = read_message(sock)
+        assert (kind, device) == ("STRING", "ACK_3") and b"SUCCESS" in body
+    p.wait(timeout=60)
+    assert p.returncode == 0, p.stderr.read()

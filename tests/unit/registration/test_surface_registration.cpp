@@ -694,12 +694,16 @@ TEST(PartialSurfaceSafeguard, ADeformableAnswerThatFitsWorseThanTheRigidFitGives
                               {"biomechanical", {{"cloud_to_model_mm", {{"mean", bio}}}}}};
     };
     const nlohmann::json determined = {{"pose_determined", true}, {"notes", nlohmann::json::array()}};
-    // The case: biomechanical 11.5 mm from the cloud, rigid 8.8, at rest 12: the rigid fit is written.
+    // The case: biomechanical 11.5 mm from the cloud, rigid 8.8, at rest 12: flagged, and
+    // the model at rest is written — the rigid fit removes only 27 % of the distance at rest (the
+    // robustness study: rigid fits to a patch were farther from the truth than rest in 28 of 33 cases).
     const auto worse = judge_deformable_answer(methods(12.0, 8.8, 11.5), determined, true, "biomechanical", "conservative", 0.6);
     ASSERT_EQ(worse.flags.size(), 1u);
     EXPECT_NE(worse.flags[0].find("worse than the rigid fit (11.50 against 8.80 mm"), std::string::npos) << worse.flags[0];
-    EXPECT_EQ(worse.answer, "rigid");
+    EXPECT_EQ(worse.answer, "at_rest");
     EXPECT_NE(worse.statement.find("safeguard keep writes biomechanical anyway"), std::string::npos) << worse.statement;
+    // A rigid fit that removes most of the distance at rest (12 → 3 mm) is written.
+    EXPECT_EQ(judge_deformable_answer(methods(12.0, 3.0, 11.5), determined, true, "biomechanical", "conservative", 0.6).answer, "rigid");
     // keep: flagged, kept.
     const auto kept = judge_deformable_answer(methods(12.0, 8.8, 11.5), determined, true, "biomechanical", "keep", 0.6);
     EXPECT_EQ(kept.answer, "biomechanical");

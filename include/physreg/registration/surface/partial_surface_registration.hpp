@@ -35,7 +35,7 @@ namespace physreg {
 /// vessel_scale, vessel_radius) are read where a case is made from files.
 struct PartialSurfaceSettings {
     std::string method = "biomechanical";     ///< the result written: biomechanical, adjoint, rigid, icp
-    std::string safeguard = "conservative";   ///< conservative: a flagged deformable result gives way to rigid or rest; keep
+    std::string safeguard = "conservative";   ///< conservative: a flagged deformable result gives way to rest (or rigid when it explains the cloud); keep
     std::string model_kind = "homogeneous";   ///< homogeneous, heterogeneous (capsule and vessels)
     double capsule_thickness = 0.1;           ///< mm
     std::string material = "healthy";         ///< healthy (3.5 kPa), cirrhotic (30 kPa)
@@ -131,8 +131,9 @@ struct PartialSurfaceResult {
 /// 5 % and 0.1 mm), when the data do not determine it, or when the model left at rest already meets
 /// the cloud to `noise_level_mm` (mean distance; 1.2 × the noise σ) and the answer removes less than
 /// half of that residual: the data show no motion.
-/// `setting` conservative then answers rigid (at rest when that fits better, the rigid starts
-/// disagree, or at rest meets the noise), keep keeps it.
+/// `setting` conservative then answers the model at rest, or the rigid fit when it removes more than
+/// half of the cloud-to-model distance at rest and the rigid starts agree on the pose (and at rest
+/// does not already meet the noise); keep keeps it.
 PartialSurfaceSafeguard judge_deformable_answer(const nlohmann::json& evaluated, const nlohmann::json& determinacy, bool rigid_pose_determined,
                                                 const std::string& requested, const std::string& setting, double noise_level_mm);
 
