@@ -15,6 +15,8 @@
 #include <Eigen/Dense>
 #include <array>
 #include <map>
+#include <memory>
+#include <set>
 #include <random>
 
 namespace physreg {
@@ -295,18 +297,31 @@ TEST(SegmentationObjective, RestOffsetsLetASegmentationRegisteredToItselfStayPut
     EXPECT_THROW(offset.set_rest_offsets({&cube}), Error);
 }
 
+// The model: a 24 mm cube. The fixed segmentation: the same cube with a rod (2 × 2 mm, 10 mm long)
+// along +x that no model node comes near.
+struct CubeAndRod {
+    LabelVolume moving, fixed;
+    VolumeMesh mesh;
+    std::unique_ptr<SignedDistanceMap> map;
+    CubeAndRod()
+    {
+        const auto cube = [](int i, int j, int k) { return i >= 4 && i < 28 && j >= 4 && j < 28 && k >= 4 && k < 28; };
+        moving = test::make_volume({44, 32, 32}, [&](int i, int j, int k) -> std::uint16_t { return cube(i, j, k) ? 1 : 0; });
+        fixed = test::make_volume({44, 32, 32}, [&](int i, int j, int k) -> std::uint16_t {
+            return cube(i, j, k) || (i >= 28 && i < 38 && j >= 15 && j < 17 && k >= 15 && k < 17) ? 1 : 0;
+        });
+        mesh = mesh_of(moving, 4.0);
+        map = std::make_unique<SignedDistanceMap>(fixed, std::set<std::int32_t>{1}, "fixed cube and rod");
+    }
+};
+
 TEST(SegmentationObjective, ReverseTermSeesWhatNoModelNodeReachesWithAnExactGradient)
 {
-    // The model: a 24 mm cube. The fixed segmentation: the same cube with a rod (2 × 2 mm, 10 mm
-    // long) along +x that no model node comes near. The forward term sees the rod only as the few
-    // millimetres its base is away; the reverse term sees its whole length.
-    const auto cube = [](int i, int j, int k) { return i >= 4 && i < 28 && j >= 4 && j < 28 && k >= 4 && k < 28; };
-    const LabelVolume moving = test::make_volume({44, 32, 32}, [&](int i, int j, int k) -> std::uint16_t { return cube(i, j, k) ? 1 : 0; });
-    const LabelVolume fixed = test::make_volume({44, 32, 32}, [&](int i, int j, int k) -> std::uint16_t {
-        return cube(i, j, k) || (i >= 28 && i < 38 && j >= 15 && j < 17 && k >= 15 && k < 17) ? 1 : 0;
-    });
-    const VolumeMesh mesh = mesh_of(moving, 4.0);
-    const SignedDistanceMap map(fixed, {1}, "fixed cube and rod");
+    // The forward term sees the rod only as the few millimetres its base is away; the reverse term
+    // sees its whole length.
+    const CubeAndRod pair;
+    const VolumeMesh& mesh = pair.mesh;
+    const SignedDistanceMap& map = *pair.map;
     const SegmentationObjective forward(mesh, {1}, {&map}, "forward");
     SegmentationObjective symmetric(mesh, {1}, {&map}, "symmetric");
     EXPECT_FALSE(symmetric.symmetric());
@@ -335,13 +350,9 @@ TEST(SegmentationObjective, ReverseTermSeesWhatNoModelNodeReachesWithAnExactGrad
 // The symmetric objective of the cube-and-rod pair at a random displacement, as a Form checked by
 // test_forms.cpp (piecewise smooth: a difference counts only where the half step agrees).
 const test::RegisterFormCase symmetric_objective{"SegmentationObjectiveForm", "symmetric, cube and rod", [] {
-    const auto cube = [](int i, int j, int k) { return i >= 4 && i < 28 && j >= 4 && j < 28 && k >= 4 && k < 28; };
-    const LabelVolume moving = test::make_volume({44, 32, 32}, [&](int i, int j, int k) -> std::uint16_t { return cube(i, j, k) ? 1 : 0; });
-    const LabelVolume fixed = test::make_volume({44, 32, 32}, [&](int i, int j, int k) -> std::uint16_t {
-        return cube(i, j, k) || (i >= 28 && i < 38 && j >= 15 && j < 17 && k >= 15 && k < 17) ? 1 : 0;
-    });
-    const VolumeMesh mesh = mesh_of(moving, 4.0);
-    const SignedDistanceMap map(fixed, {1}, "fixed cube and rod");
+    const CubeAndRod pair;
+    const VolumeMesh& mesh = pair.mesh;
+    const SignedDistanceMap& map = *pair.map;
     SegmentationObjective symmetric(mesh, {1}, {&map}, "symmetric");
     symmetric.add_reverse_term();
     std::mt19937 random(5);
