@@ -242,15 +242,305 @@ std::string xml_attribute(const std::string& xml, const std::string& attribute)
 
 } // namespace
 
+namespace {
+
+struct ServeOptions : CommonOptions {
+    std::string dataset, parameters, host = "127.0.0.1", frame = "ras", tool = "tool", record, cloud = "cloud", client, segmentation = "segmentation";
+    int port = 0;
+    double surface_cell_size = PartialSurfaceSettings{}.cell_size;
+    bool once = false;
+};
+
+/// One served model and the sessions on it: the body model with its condensed contact (paper 000),
+/// the liver model for clouds (paper 001, meshed at the first cloud) and the registrations of clouds
+/// and segmentations (paper 002) that run in the background, one at a time (the latest input
+/// waiting replaces older ones).
+class ServeSession {
+public:
+    ServeSession(const ServeOptions& o, const CompressionRegistrationSettings& s);
+    /// Listens (or connects, in client mode) and serves until the connection that ends it.
+    void run();
+
+private:
+    struct Job {
+        std::function<BackgroundAnswer()> run;
+        std::string device;
+        std::uint64_t timestamp = 0;
+    };
+    void serve_connection(int fd);
+    /// Stamps `m` with `timestamp`, sends it and records it.
+    void send(int fd, igtl::MessageBase* m, std::uint64_t timestamp);
+    /// One JSON line per message in --record; what came in with its bytes (hex), so that `physreg
+    /// replay` can send the session again at its own pace.
+    void record(const char* direction, const std::string& type, const std::string& device, std::uint64_t timestamp,
+                const std::vector<std::uint8_t>* raw = nullptr);
+    /// The latest of the queued poses (stale ones dropped; a non-pose message read meanwhile goes to `pending`), answered.
+    void answer_pose(int fd, IgtlMessage message, std::optional<IgtlMessage>& pending);
+    void answer_command(int fd, const IgtlMessage& message);
+    void queue(Job job);
+    /// A finished background registration's answer sent (or its refusal as a STATUS), the next one started.
+    void deliver_background(int fd);
+    BackgroundAnswer register_cloud(const LabelledPointCloud& cloud);
+    BackgroundAnswer register_segmentation(const LabelVolume& labels);
+
+    const ServeOptions& m_o;
+    const bool m_client_mode;
+    const double m_wire; ///< −1: RAS on the wire (x and y change sign), 1: LPS
+    std::chrono::steady_clock::time_point m_t0;
+    CompressionSubject m_subject;
+    std::vector<OrganSurface> m_surfaces;
+    Indenter m_tool_shape;
+    std::unique_ptr<CondensedContactModel> m_condensed;
+    double m_ready_s = 0.0;
+    std::ofstream m_record;
+    int m_updates = 0;
+    PartialSurfaceSettings m_surface_settings;
+    std::optional<SurfaceModel> m_surface_model; // meshed at the first cloud
+    std::future<BackgroundAnswer> m_running;
+    Job m_running_job;
+    std::optional<Job> m_waiting;
+};
+
+ServeSession::ServeSession(const ServeOptions& o, const CompressionRegistrationSettings& s)
+    : m_o(o), m_client_mode(!o.client.empty()), m_wire(o.frame == "ras" ? -1.0 : 1.0), m_t0(std::chrono::steady_clock::now())
+{
+    const PhantomDataset dataset = read_phantom_dataset(o.dataset);
+    m_subject = read_dataset_compression_subject(o.dataset, s, o.parameters);
+    const LiverModel& model = m_subject.model;
+    std::vector<Indenter> session_tools;
+    for (const auto& st : dataset.states)
+        if (st.tool && st.kind == "compression") session_tools.push_back(*st.tool);
+    if (session_tools.empty()) fail("serve: dataset '{}' has no tool compression (the tool's shape and the session's paths)", o.dataset);
+    m_tool_shape = session_tools.front();
+    // The nodes each update returns: every organ surface's, and those the targets read.
+    m_surfaces = organ_surfaces(model, m_subject.roles);
+    std::set<std::int32_t> wanted;
+    for (const auto& surface : m_surfaces) wanted.insert(surface.nodes.begin(), surface.nodes.end());
+    std::vector<Vec3> targets;
+    for (const auto& l : m_subject.rest_landmarks) targets.push_back(l.position);
+    for (const auto n : nodes_near(model.mesh, targets, 2.0 * model.cell_size_mm.maxCoeff())) wanted.insert(n);
+    CondensedContactOptions condensed_options;
+    condensed_options.memory_limit_bytes = s.memory_limit_bytes();
+    m_condensed = std::make_unique<CondensedContactModel>(model, session_tools, std::vector<std::int32_t>(wanted.begin(), wanted.end()), condensed_options);
+    m_ready_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - m_t0).count();
+    if (!o.record.empty()) {
+        m_record.open(o.record);
+        if (!m_record) fail("--record '{}': cannot write", o.record);
+    }
+    m_surface_settings.cell_size = o.surface_cell_size;
+    validate(m_surface_settings, SettingNaming::option);
+}
+
+void ServeSession::run()
+{
+    const int yes = 1;
+    Descriptor listener(m_client_mode ? -1 : ::socket(AF_INET, SOCK_STREAM, 0));
+    if (!m_client_mode) {
+        if (listener.get() < 0) fail("serve: cannot open a socket: {}", std::strerror(errno));
+        ::setsockopt(listener.get(), SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+        sockaddr_in address{};
+        address.sin_family = AF_INET;
+        address.sin_port = htons(static_cast<std::uint16_t>(m_o.port));
+        if (::inet_pton(AF_INET, m_o.host.c_str(), &address.sin_addr) != 1) fail("--host '{}' is not an IPv4 address", m_o.host);
+        if (::bind(listener.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0)
+            fail("--port {}: cannot listen on {}:{}: {}", m_o.port, m_o.host, m_o.port, std::strerror(errno));
+        ::listen(listener.get(), 1);
+    }
+    const std::string where = m_client_mode ? fmt::format("connecting to {}", m_o.client) : fmt::format("listening on {}:{}", m_o.host, m_o.port);
+    logger()->info("serve: model {} nodes, {} candidate skin nodes, {} surface and target nodes; ready in {:.1f} s, {} ({} frame)",
+                   m_subject.model.mesh.node_count(), m_condensed->precomputation().candidate_nodes, m_condensed->query_nodes().size(), m_ready_s, where,
+                   m_o.frame);
+    std::cerr << fmt::format("serve: {}\n", where) << std::flush;
+    do {
+        Descriptor client(m_client_mode ? connect_to(m_o.client, "--client") : ::accept(listener.get(), nullptr, nullptr));
+        if (client.get() < 0) fail("serve: accept failed: {}", std::strerror(errno));
+        ::setsockopt(client.get(), IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+        logger()->info(m_client_mode ? "serve: connected to the server" : "serve: a client connected");
+        serve_connection(client.get());
+        if (m_running.valid()) m_running.wait(); // a registration still running finishes before the next client
+        m_running = {};
+        m_waiting.reset();
+        logger()->info("serve: the {} disconnected after {} updates", m_client_mode ? "server" : "client", m_updates);
+    } while (!m_o.once && !m_client_mode); // a client session ends with its server's connection
+}
+
+void ServeSession::serve_connection(int fd)
+{
+    std::optional<IgtlMessage> pending; // read while dropping stale poses, not answered yet
+    while (true) {
+        if (m_running.valid() && m_running.wait_for(std::chrono::seconds(0)) == std::future_status::ready) deliver_background(fd);
+        if (!pending && !more_waiting(fd, m_running.valid() ? 50 : -1)) continue;
+        auto message = pending ? std::move(pending) : read_igtl_message(fd);
+        pending.reset();
+        if (!message) return;
+        record("in", message->type, message->device, message->timestamp, &message->raw);
+        if (message->type == "TRANSFORM" && message->device == m_o.tool) {
+            answer_pose(fd, std::move(*message), pending);
+        } else if (message->type == "STRING" && message->device.rfind("CMD_", 0) == 0) {
+            answer_command(fd, *message);
+        } else if (message->type == "POLYDATA" && message->device == m_o.cloud) {
+            LabelledPointCloud cloud;
+            cloud.points = polydata_points(*message, m_wire);
+            cloud.labels.assign(cloud.points.size(), 0);
+            queue({[this, cloud = std::move(cloud)] { return register_cloud(cloud); }, m_o.cloud, message->timestamp});
+        } else if (message->type == "IMAGE" && message->device == m_o.segmentation) {
+            std::optional<LabelVolume> labels;
+            try {
+                labels = igtl_image_labels(*message);
+            } catch (const Error& e) {
+                // An image that is no segmentation (a grey-level frame sent under its name): said on the wire, the session goes on.
+                send(fd, error_status_message(m_o.segmentation, e.what()), message->timestamp);
+                logger()->warn("serve: {}", e.what());
+            }
+            if (labels) queue({[this, labels = std::move(*labels)] { return register_segmentation(labels); }, m_o.segmentation, message->timestamp});
+        }
+        // STATUS (Slicer sends one on connecting), other devices and unknown types: skipped.
+    }
+}
+
+void ServeSession::send(int fd, igtl::MessageBase* m, std::uint64_t timestamp)
+{
+    stamp(m, timestamp);
+    send_message(fd, m);
+    record("out", m->GetDeviceType(), m->GetDeviceName(), timestamp);
+}
+
+void ServeSession::record(const char* direction, const std::string& type, const std::string& device, std::uint64_t timestamp,
+                          const std::vector<std::uint8_t>* raw)
+{
+    if (!m_record) return;
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - m_t0).count();
+    nlohmann::json line{{"direction", direction}, {"type", type}, {"device", device}, {"timestamp", timestamp}, {"wall_s", wall}};
+    if (raw) line["bytes_hex"] = to_hex(*raw);
+    m_record << line.dump() << "\n";
+    m_record.flush();
+}
+
+void ServeSession::answer_pose(int fd, IgtlMessage message, std::optional<IgtlMessage>& pending)
+{
+    // The latest pose wins: poses queued behind this one replace it unanswered.
+    int dropped = 0;
+    while (more_waiting(fd)) {
+        auto next = read_igtl_message(fd);
+        if (!next) break;
+        if (next->type != "TRANSFORM" || next->device != m_o.tool) {
+            pending = std::move(next); // answered after this pose, in order
+            break;
+        }
+        record("in", next->type, next->device, next->timestamp, &next->raw);
+        message = std::move(*next);
+        ++dropped;
+    }
+    if (message.content.size() < 48) fail("OpenIGTLink: TRANSFORM '{}' holds {} bytes, not 48", message.device, message.content.size());
+    const Vec3 position(m_wire * read_float_be(message.content.data() + 36), m_wire * read_float_be(message.content.data() + 40),
+                        read_float_be(message.content.data() + 44));
+    const auto started = std::chrono::steady_clock::now();
+    const LiverModel& model = m_subject.model;
+    const auto update = m_condensed->move_to(m_tool_shape, position);
+    const std::vector<double> u = m_condensed->query_field_mm();
+    for (const auto& surface : m_surfaces) send(fd, organ_surface_message(surface, model, u, m_wire), message.timestamp);
+    send(fd, points_message("targets", move_landmarks(model, u, m_subject.rest_landmarks), m_wire, true), message.timestamp);
+    ++m_updates;
+    logger()->debug("serve: update {} at ({:.1f}, {:.1f}, {:.1f}) mm LPS: {} nodes in contact, {:.2f} ms ({} stale poses dropped)", m_updates, position[0],
+                    position[1], position[2], update.active_nodes,
+                    std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count(), dropped);
+}
+
+void ServeSession::answer_command(int fd, const IgtlMessage& message)
+{
+    const std::string xml = message.content.size() > 4 ? std::string(message.content.begin() + 4, message.content.end()) : "";
+    const std::string command = xml_attribute(xml, "Name");
+    std::string answer;
+    if (command == "reset") {
+        m_condensed->reset();
+        answer = "<Command Status=\"SUCCESS\" Message=\"the model is at rest\"/>";
+    } else if (command == "status") {
+        answer = fmt::format("<Command Status=\"SUCCESS\" Updates=\"{}\" Nodes=\"{}\" Frame=\"{}\"/>", m_updates, m_subject.model.mesh.node_count(), m_o.frame);
+    } else {
+        answer = fmt::format("<Command Status=\"FAIL\" Message=\"unknown command '{}' (reset, status)\"/>", command);
+    }
+    auto ack = igtl::StringMessage::New();
+    ack->SetDeviceName(("ACK_" + message.device.substr(4)).c_str());
+    ack->SetString(answer.c_str());
+    send(fd, ack, message.timestamp);
+}
+
+void ServeSession::queue(Job job)
+{
+    if (m_running.valid()) {
+        m_waiting = std::move(job); // the latest waiting input wins
+        return;
+    }
+    m_running_job = std::move(job);
+    m_running = std::async(std::launch::async, m_running_job.run);
+}
+
+void ServeSession::deliver_background(int fd)
+{
+    // A registration is done: its answer goes out with its input's timestamp.
+    try {
+        const BackgroundAnswer answer = m_running.get();
+        for (const auto& m : answer.messages) send(fd, m, m_running_job.timestamp);
+        logger()->info("serve: {}", answer.note);
+    } catch (const Error& e) {
+        // An input the pipeline refuses is the client's bad input: said on the wire, the session goes on.
+        send(fd, error_status_message(m_running_job.device, e.what()), m_running_job.timestamp);
+        logger()->warn("serve: {} refused: {}", m_running_job.device, e.what());
+    }
+    if (m_waiting) {
+        Job next = std::move(*m_waiting);
+        m_waiting.reset();
+        queue(std::move(next));
+    }
+}
+
+BackgroundAnswer ServeSession::register_cloud(const LabelledPointCloud& cloud)
+{
+    if (!m_surface_model) {
+        std::set<std::int32_t> liver(m_subject.roles.liver.begin(), m_subject.roles.liver.end());
+        liver.insert(m_subject.roles.lesion.begin(), m_subject.roles.lesion.end());
+        liver.insert(m_subject.roles.vessel.begin(), m_subject.roles.vessel.end());
+        // No notch region: the wire's clouds are unlabelled, and every triangle is "surface" to them.
+        m_surface_model = surface_model_from_labels(m_subject.labels, liver, m_surface_settings.cell_size, std::nullopt,
+                                                    static_cast<unsigned>(m_surface_settings.seed), "serve: the liver model for clouds");
+    }
+    PartialSurfaceCase c;
+    c.mesh = m_surface_model->mesh;
+    c.surface = m_surface_model->surface;
+    c.quality = m_surface_model->quality;
+    c.cloud = cloud;
+    c.patient_frame = true; // meshed from the subject's label volume
+    c.landmarks = m_subject.rest_landmarks;
+    const PartialSurfaceResult r = register_partial_surface(c, m_surface_settings);
+    BackgroundAnswer answer;
+    answer.messages.push_back(registered_surface_message(*m_surface_model, r.chosen_method().displacement_mm, m_wire).GetPointer());
+    answer.messages.push_back(points_message("targets_registered", *r.landmarks, m_wire, false).GetPointer());
+    answer.note = fmt::format("cloud registered ({}; {})", r.chosen_method().name, r.safeguard.statement);
+    return answer;
+}
+
+BackgroundAnswer ServeSession::register_segmentation(const LabelVolume& labels)
+{
+    const ImageRegistrationResult r = register_segmentation_pair(m_subject, labels, m_o.segmentation);
+    const DisplacementField& field = r.chosen_method().field; // intra-operative → pre-operative (the subject's rest)
+    const LiverModel& model = m_subject.model;
+    BackgroundAnswer answer;
+    for (const auto& surface : m_surfaces)
+        answer.messages.push_back(
+            organ_surface_message(surface, model, displacement_through_inverse(field, model.mesh.nodes, surface.nodes), m_wire, surface.name + "_segmentation")
+                .GetPointer());
+    LandmarkSet targets = m_subject.rest_landmarks;
+    for (auto& l : targets) invert_field_at(field, Vec3(l.position), l.position);
+    answer.messages.push_back(points_message("targets_segmentation", targets, m_wire, true).GetPointer());
+    answer.note = fmt::format("segmentation registered ({}; mean Dice {})", r.chosen_method().name, mean_dice(r, r.chosen_method().name));
+    return answer;
+}
+
+} // namespace
+
 void add_subcommand_serve(CLI::App& app)
 {
-    struct Options : CommonOptions {
-        std::string dataset, parameters, host = "127.0.0.1", frame = "ras", tool = "tool", record, cloud = "cloud", client, segmentation = "segmentation";
-        int port = 0;
-        double surface_cell_size = PartialSurfaceSettings{}.cell_size;
-        bool once = false;
-    };
-    auto o = std::make_shared<Options>();
+    auto o = std::make_shared<ServeOptions>();
     auto* sub = app.add_subcommand("serve", "Paper 000 live over OpenIGTLink: tool poses (TRANSFORM) in, the body model's organ surfaces "
                                             "(POLYDATA) and targets (POINT) out, by condensed contact");
     sub->add_option("--dataset", o->dataset, "Phantom dataset: the body at rest, its landmarks, the tool and the session's paths")->required();
@@ -273,249 +563,13 @@ void add_subcommand_serve(CLI::App& app)
     sub->add_flag("--once", o->once, "Stop when the first client disconnects (tests, scripts)");
     sub->callback([o, settings] {
         if (o->client.empty() == (o->port == 0)) fail("serve: give --port (listen) or --client HOST:PORT (connect to a PlusServer), not both");
-        const bool client_mode = !o->client.empty();
-        if (client_mode && o->client.rfind(':') == std::string::npos) fail("--client '{}': give HOST:PORT", o->client);
-        if (!client_mode && (o->port < 1 || o->port > 65535)) fail("--port {} must lie in 1 … 65535", o->port);
+        if (!o->client.empty() && o->client.rfind(':') == std::string::npos) fail("--client '{}': give HOST:PORT", o->client);
+        if (o->client.empty() && (o->port < 1 || o->port > 65535)) fail("--port {} must lie in 1 … 65535", o->port);
         if (o->frame != "ras" && o->frame != "lps") fail("--frame '{}': use ras or lps", o->frame);
         const CompressionRegistrationSettings s = settings->resolve();
         validate(s, SettingNaming::option);
-        const auto t0 = std::chrono::steady_clock::now();
-        const PhantomDataset dataset = read_phantom_dataset(o->dataset);
-        const CompressionSubject subject = read_dataset_compression_subject(o->dataset, s, o->parameters);
-        const LiverModel& model = subject.model;
-        std::vector<Indenter> session_tools;
-        for (const auto& st : dataset.states)
-            if (st.tool && st.kind == "compression") session_tools.push_back(*st.tool);
-        if (session_tools.empty()) fail("serve: dataset '{}' has no tool compression (the tool's shape and the session's paths)", o->dataset);
-        const Indenter tool_shape = session_tools.front();
-        // The nodes each update returns: every organ surface's, and those the targets read.
-        const auto surfaces = organ_surfaces(model, subject.roles);
-        std::set<std::int32_t> wanted;
-        for (const auto& surface : surfaces) wanted.insert(surface.nodes.begin(), surface.nodes.end());
-        std::vector<Vec3> targets;
-        for (const auto& l : subject.rest_landmarks) targets.push_back(l.position);
-        for (const auto n : nodes_near(model.mesh, targets, 2.0 * model.cell_size_mm.maxCoeff())) wanted.insert(n);
-        CondensedContactOptions condensed_options;
-        condensed_options.memory_limit_bytes = s.memory_limit_bytes();
-        CondensedContactModel condensed(model, session_tools, std::vector<std::int32_t>(wanted.begin(), wanted.end()), condensed_options);
-        std::vector<std::int64_t> query_index(model.mesh.node_count(), -1);
-        for (std::size_t i = 0; i < condensed.query_nodes().size(); ++i) query_index[condensed.query_nodes()[i]] = static_cast<std::int64_t>(i);
-        const double ready_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        const double wire = o->frame == "ras" ? -1.0 : 1.0; // RAS ↔ LPS: x and y change sign
-
-        const int yes = 1;
-        Descriptor listener(client_mode ? -1 : ::socket(AF_INET, SOCK_STREAM, 0));
-        if (!client_mode) {
-            if (listener.get() < 0) fail("serve: cannot open a socket: {}", std::strerror(errno));
-            ::setsockopt(listener.get(), SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
-            sockaddr_in address{};
-            address.sin_family = AF_INET;
-            address.sin_port = htons(static_cast<std::uint16_t>(o->port));
-            if (::inet_pton(AF_INET, o->host.c_str(), &address.sin_addr) != 1) fail("--host '{}' is not an IPv4 address", o->host);
-            if (::bind(listener.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0)
-                fail("--port {}: cannot listen on {}:{}: {}", o->port, o->host, o->port, std::strerror(errno));
-            ::listen(listener.get(), 1);
-        }
-        std::ofstream record;
-        if (!o->record.empty()) {
-            record.open(o->record);
-            if (!record) fail("--record '{}': cannot write", o->record);
-        }
-        // One JSON line per message; what came in with its bytes (hex), so that `physreg replay` can
-        // send the session again at its own pace.
-        const auto log_message = [&](const char* direction, const std::string& type, const std::string& device, std::uint64_t timestamp,
-                                     const std::vector<std::uint8_t>* raw = nullptr) {
-            if (!record) return;
-            const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-            nlohmann::json line{{"direction", direction}, {"type", type}, {"device", device}, {"timestamp", timestamp}, {"wall_s", wall}};
-            if (raw) line["bytes_hex"] = to_hex(*raw);
-            record << line.dump() << "\n";
-            record.flush();
-        };
-        const std::string where = client_mode ? fmt::format("connecting to {}", o->client) : fmt::format("listening on {}:{}", o->host, o->port);
-        logger()->info("serve: model {} nodes, {} candidate skin nodes, {} surface and target nodes; ready in {:.1f} s, {} ({} frame)",
-                       model.mesh.node_count(), condensed.precomputation().candidate_nodes, condensed.query_nodes().size(), ready_s, where, o->frame);
-        std::cerr << fmt::format("serve: {}\n", where) << std::flush;
-        int updates = 0;
-        // Clouds (paper 001) and segmentations (paper 002) are registered in the background, one at a
-        // time, while tool updates go on; the latest input waiting replaces older ones. A job returns
-        // the messages to send (stamped with its input's timestamp when done).
-        PartialSurfaceSettings surface_settings;
-        surface_settings.cell_size = o->surface_cell_size;
-        validate(surface_settings, SettingNaming::option);
-        std::optional<SurfaceModel> surface_model; // meshed at the first cloud
-        struct Job {
-            std::function<BackgroundAnswer()> run;
-            std::string device;
-            std::uint64_t timestamp = 0;
-        };
-        std::future<BackgroundAnswer> running;
-        Job running_job;
-        std::optional<Job> waiting;
-        const auto start_job = [&](Job job) {
-            running_job = std::move(job);
-            running = std::async(std::launch::async, running_job.run);
-        };
-        const auto cloud_job = [&](LabelledPointCloud cloud) {
-            return [&, cloud = std::move(cloud)]() {
-                if (!surface_model) {
-                    std::set<std::int32_t> liver(subject.roles.liver.begin(), subject.roles.liver.end());
-                    liver.insert(subject.roles.lesion.begin(), subject.roles.lesion.end());
-                    liver.insert(subject.roles.vessel.begin(), subject.roles.vessel.end());
-                    // No notch region: the wire's clouds are unlabelled, and every triangle is "surface" to them.
-                    surface_model = surface_model_from_labels(subject.labels, liver, surface_settings.cell_size, std::nullopt,
-                                                              static_cast<unsigned>(surface_settings.seed), "serve: the liver model for clouds");
-                }
-                PartialSurfaceCase c;
-                c.mesh = surface_model->mesh;
-                c.surface = surface_model->surface;
-                c.quality = surface_model->quality;
-                c.cloud = cloud;
-                c.patient_frame = true; // meshed from the subject's label volume
-                c.landmarks = subject.rest_landmarks;
-                const PartialSurfaceResult r = register_partial_surface(c, surface_settings);
-                BackgroundAnswer answer;
-                answer.messages.push_back(registered_surface_message(*surface_model, r.chosen_method().displacement_mm, wire).GetPointer());
-                answer.messages.push_back(points_message("targets_registered", *r.landmarks, wire, false).GetPointer());
-                answer.note = fmt::format("cloud registered ({}; {})", r.chosen_method().name, r.safeguard.statement);
-                return answer;
-            };
-        };
-        const auto segmentation_job = [&](LabelVolume labels) {
-            return [&, labels = std::move(labels)]() {
-                const ImageRegistrationResult r = register_segmentation_pair(subject, labels, o->segmentation);
-                const DisplacementField& field = r.chosen_method().field; // intra-operative → pre-operative (the subject's rest)
-                BackgroundAnswer answer;
-                for (const auto& surface : surfaces)
-                    answer.messages.push_back(organ_surface_message(surface, model, displacement_through_inverse(field, model.mesh.nodes, surface.nodes), wire,
-                                                                    surface.name + "_segmentation").GetPointer());
-                LandmarkSet targets = subject.rest_landmarks;
-                for (auto& l : targets) invert_field_at(field, Vec3(l.position), l.position);
-                answer.messages.push_back(points_message("targets_segmentation", targets, wire, true).GetPointer());
-                answer.note = fmt::format("segmentation registered ({}; mean Dice {})", r.chosen_method().name, mean_dice(r, r.chosen_method().name));
-                return answer;
-            };
-        };
-        do {
-            Descriptor client(client_mode ? connect_to(o->client, "--client") : ::accept(listener.get(), nullptr, nullptr));
-            if (client.get() < 0) fail("serve: accept failed: {}", std::strerror(errno));
-            ::setsockopt(client.get(), IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
-            logger()->info(client_mode ? "serve: connected to the server" : "serve: a client connected");
-            std::optional<IgtlMessage> pending; // read while dropping stale poses, not answered yet
-            while (true) {
-                if (running.valid() && running.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
-                    // A registration is done: its answer goes out with its input's timestamp.
-                    try {
-                        const BackgroundAnswer answer = running.get();
-                        for (const auto& m : answer.messages) {
-                            stamp(m, running_job.timestamp);
-                            send_message(client.get(), m);
-                            log_message("out", m->GetDeviceType(), m->GetDeviceName(), running_job.timestamp);
-                        }
-                        logger()->info("serve: {}", answer.note);
-                    } catch (const Error& e) {
-                        // An input the pipeline refuses is the client's bad input: said on the wire, the session goes on.
-                        auto status = error_status_message(running_job.device, e.what());
-                        stamp(status, running_job.timestamp);
-                        send_message(client.get(), status);
-                        log_message("out", "STATUS", running_job.device, running_job.timestamp);
-                        logger()->warn("serve: {} refused: {}", running_job.device, e.what());
-                    }
-                    if (waiting) {
-                        start_job(std::move(*waiting));
-                        waiting.reset();
-                    }
-                }
-                if (!pending && !more_waiting(client.get(), running.valid() ? 50 : -1)) continue;
-                auto message = pending ? std::move(pending) : read_igtl_message(client.get());
-                pending.reset();
-                if (!message) break;
-                log_message("in", message->type, message->device, message->timestamp, &message->raw);
-                if (message->type == "TRANSFORM" && message->device == o->tool) {
-                    // The latest pose wins: poses queued behind this one replace it unanswered.
-                    int dropped = 0;
-                    while (more_waiting(client.get())) {
-                        auto next = read_igtl_message(client.get());
-                        if (!next) break;
-                        if (next->type != "TRANSFORM" || next->device != o->tool) {
-                            pending = std::move(next); // answered after this pose, in order
-                            break;
-                        }
-                        log_message("in", next->type, next->device, next->timestamp, &next->raw);
-                        message = std::move(next);
-                        ++dropped;
-                    }
-                    if (message->content.size() < 48) fail("OpenIGTLink: TRANSFORM '{}' holds {} bytes, not 48", message->device, message->content.size());
-                    const Vec3 position(wire * read_float_be(message->content.data() + 36), wire * read_float_be(message->content.data() + 40),
-                                        read_float_be(message->content.data() + 44));
-                    const auto started = std::chrono::steady_clock::now();
-                    const auto update = condensed.move_to(tool_shape, position);
-                    const std::vector<double> u = condensed.query_field_mm();
-                    const LandmarkSet moved = move_landmarks(model, u, subject.rest_landmarks);
-                    for (const auto& surface : surfaces) {
-                        auto reply = organ_surface_message(surface, model, u, wire);
-                        stamp(reply, message->timestamp);
-                        send_message(client.get(), reply);
-                        log_message("out", "POLYDATA", surface.name, message->timestamp);
-                    }
-                    auto targets_message = points_message("targets", moved, wire, true);
-                    stamp(targets_message, message->timestamp);
-                    send_message(client.get(), targets_message);
-                    log_message("out", "POINT", "targets", message->timestamp);
-                    ++updates;
-                    logger()->debug("serve: update {} at ({:.1f}, {:.1f}, {:.1f}) mm LPS: {} nodes in contact, {:.2f} ms ({} stale poses dropped)", updates,
-                                    position[0], position[1], position[2], update.active_nodes,
-                                    std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count(), dropped);
-                } else if (message->type == "STRING" && message->device.rfind("CMD_", 0) == 0) {
-                    const std::string xml = message->content.size() > 4 ? std::string(message->content.begin() + 4, message->content.end()) : "";
-                    const std::string command = xml_attribute(xml, "Name");
-                    std::string answer;
-                    if (command == "reset") {
-                        condensed.reset();
-                        answer = "<Command Status=\"SUCCESS\" Message=\"the model is at rest\"/>";
-                    } else if (command == "status") {
-                        answer = fmt::format("<Command Status=\"SUCCESS\" Updates=\"{}\" Nodes=\"{}\" Frame=\"{}\"/>", updates, model.mesh.node_count(), o->frame);
-                    } else {
-                        answer = fmt::format("<Command Status=\"FAIL\" Message=\"unknown command '{}' (reset, status)\"/>", command);
-                    }
-                    auto ack = igtl::StringMessage::New();
-                    ack->SetDeviceName(("ACK_" + message->device.substr(4)).c_str());
-                    ack->SetString(answer.c_str());
-                    stamp(ack, message->timestamp);
-                    send_message(client.get(), ack);
-                    log_message("out", "STRING", "ACK_" + message->device.substr(4), message->timestamp);
-                } else if (message->type == "POLYDATA" && message->device == o->cloud) {
-                    LabelledPointCloud cloud;
-                    cloud.points = polydata_points(*message, wire);
-                    cloud.labels.assign(cloud.points.size(), 0);
-                    Job job{cloud_job(std::move(cloud)), o->cloud, message->timestamp};
-                    if (running.valid()) waiting = std::move(job); // the latest waiting input wins
-                    else start_job(std::move(job));
-                } else if (message->type == "IMAGE" && message->device == o->segmentation) {
-                    std::optional<LabelVolume> labels;
-                    try {
-                        labels = igtl_image_labels(*message);
-                    } catch (const Error& e) {
-                        // An image that is no segmentation (a grey-level frame sent under its name): said on the wire, the session goes on.
-                        auto status = error_status_message(o->segmentation, e.what());
-                        stamp(status, message->timestamp);
-                        send_message(client.get(), status);
-                        log_message("out", "STATUS", o->segmentation, message->timestamp);
-                        logger()->warn("serve: {}", e.what());
-                    }
-                    if (labels) {
-                        Job job{segmentation_job(std::move(*labels)), o->segmentation, message->timestamp};
-                        if (running.valid()) waiting = std::move(job);
-                        else start_job(std::move(job));
-                    }
-                }
-                // STATUS (Slicer sends one on connecting), other devices and unknown types: skipped.
-            }
-            if (running.valid()) running.wait(); // a registration still running finishes before the next client
-            running = {};
-            waiting.reset();
-            logger()->info("serve: the {} disconnected after {} updates", client_mode ? "server" : "client", updates);
-        } while (!o->once && !client_mode); // a client session ends with its server's connection
+        ServeSession session(*o, s);
+        session.run();
     });
 }
 
