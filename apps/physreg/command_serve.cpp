@@ -8,11 +8,12 @@
 // IMAGE named after the segmentation (labels) by paper 002's, in the background while tool updates
 // go on; their answers are POLYDATA liver_registered / <organ>_segmentation and POINT
 // targets_registered / targets_segmentation. STRING CMD_<id> (PLUS's command form, XML body with
-// Name="…") is answered ACK_<id>: status, reset. STATUS is ignored, unknown types are skipped by
+// Name="…") is answered ACK_<id>: status, reset, and field (the dense displacement field as IMAGE). STATUS is ignored, unknown types are skipped by
 // their body size. Headers of version 1 and 2 are read here (the 1.11 library cannot unpack
 // version 2, which Slicer sends); answers use version 1, packed by Debian's libopenigtlink.
 #include "cli_support.hpp"
 #include "igtl_wire.hpp"
+#include "physreg/field/displacement_sampling.hpp"
 #include "physreg/field/field_mapping.hpp"
 #include "physreg/registration/images/image_registration.hpp"
 #include "settings_options.hpp"
@@ -25,10 +26,12 @@
 #include "physreg/registration/surface/partial_surface_registration.hpp"
 #include "physreg/registration/surface/surface_model.hpp"
 
+#include <igtlImageMessage.h>
 #include <igtlPointMessage.h>
 #include <igtlPolyDataMessage.h>
 #include <igtlStatusMessage.h>
 #include <igtlStringMessage.h>
+#include <igtl_util.h>
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -38,6 +41,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <future>
 #include <fstream>
@@ -231,6 +235,42 @@ std::string mean_dice(const ImageRegistrationResult& r, const std::string& metho
     return dice.empty() ? std::string("-") : fmt::format("{:.3f}", sum / static_cast<double>(dice.size()));
 }
 
+/// The displacement field of every node `u` (3 per node, mm) sampled on a grid over the mesh
+/// (`spacing_mm`) as IMAGE "displacement": float32, 3 components (the displacement in the wire's
+/// frame, mm; 0 outside the model), the wire's coordinate system, origin at the volume's centre.
+igtl::ImageMessage::Pointer displacement_image_message(const VolumeMesh& mesh, const std::vector<double>& u, double spacing_mm, double wire)
+{
+    const ImageGeometry g = image_grid_over_mesh(mesh, spacing_mm, spacing_mm);
+    const SampledField f = sample_displacement_field(mesh, u, g);
+    auto m = igtl::ImageMessage::New();
+    m->SetDeviceName("displacement");
+    m->SetDimensions(static_cast<int>(g.size[0]), static_cast<int>(g.size[1]), static_cast<int>(g.size[2]));
+    m->SetSpacing(static_cast<float>(g.spacing[0]), static_cast<float>(g.spacing[1]), static_cast<float>(g.spacing[2]));
+    m->SetScalarType(igtl::ImageMessage::TYPE_FLOAT32);
+    m->SetNumComponents(3);
+    m->SetEndian(igtl_is_little_endian() ? igtl::ImageMessage::ENDIAN_LITTLE : igtl::ImageMessage::ENDIAN_BIG); // the scalars go as they are in memory
+    m->SetCoordinateSystem(wire < 0 ? igtl::ImageMessage::COORDINATE_RAS : igtl::ImageMessage::COORDINATE_LPS);
+    Vec3 centre = g.origin;
+    for (int a = 0; a < 3; ++a) centre += g.direction.col(a) * (g.spacing[a] * 0.5 * static_cast<double>(g.size[a] - 1));
+    igtl::Matrix4x4 matrix;
+    igtl::IdentityMatrix(matrix);
+    for (int row = 0; row < 3; ++row) {
+        const double flip = row < 2 ? wire : 1.0;
+        for (int col = 0; col < 3; ++col) matrix[row][col] = static_cast<float>(flip * g.direction(row, col));
+        matrix[row][3] = static_cast<float>(flip * centre[row]);
+    }
+    m->SetMatrix(matrix);
+    m->AllocateScalars();
+    auto* out = static_cast<float*>(m->GetScalarPointer());
+    const auto& c = f.field.components;
+    for (std::size_t v = 0; v < c.size() / 3; ++v) {
+        out[3 * v] = static_cast<float>(wire * c[3 * v]);
+        out[3 * v + 1] = static_cast<float>(wire * c[3 * v + 1]);
+        out[3 * v + 2] = c[3 * v + 2];
+    }
+    return m;
+}
+
 /// The attribute value Name="…" of a PLUS command's XML body ("" when absent).
 std::string xml_attribute(const std::string& xml, const std::string& attribute)
 {
@@ -248,6 +288,7 @@ struct ServeOptions : CommonOptions {
     std::string dataset, parameters, host = "127.0.0.1", frame = "ras", tool = "tool", record, cloud = "cloud", client, segmentation = "segmentation";
     int port = 0;
     double surface_cell_size = PartialSurfaceSettings{}.cell_size;
+    double field_spacing = 4.0;
     bool once = false;
 };
 
@@ -454,10 +495,14 @@ void ServeSession::answer_command(int fd, const IgtlMessage& message)
     if (command == "reset") {
         m_condensed->reset();
         answer = "<Command Status=\"SUCCESS\" Message=\"the model is at rest\"/>";
+    } else if (command == "field") {
+        // The dense field of the current state, on request only (one solve with the factor for every node).
+        send(fd, displacement_image_message(m_subject.model.mesh, m_condensed->full_displacement_mm(), m_o.field_spacing, m_wire), message.timestamp);
+        answer = fmt::format("<Command Status=\"SUCCESS\" Message=\"IMAGE displacement sent ({} mm voxels)\"/>", m_o.field_spacing);
     } else if (command == "status") {
         answer = fmt::format("<Command Status=\"SUCCESS\" Updates=\"{}\" Nodes=\"{}\" Frame=\"{}\"/>", m_updates, m_subject.model.mesh.node_count(), m_o.frame);
     } else {
-        answer = fmt::format("<Command Status=\"FAIL\" Message=\"unknown command '{}' (reset, status)\"/>", command);
+        answer = fmt::format("<Command Status=\"FAIL\" Message=\"unknown command '{}' (reset, status, field)\"/>", command);
     }
     auto ack = igtl::StringMessage::New();
     ack->SetDeviceName(("ACK_" + message.device.substr(4)).c_str());
@@ -560,12 +605,14 @@ void add_subcommand_serve(CLI::App& app)
                                                        "dataset's): each is registered by paper 002's pipeline in the background (default 'segmentation'); "
                                                        "the organ surfaces and targets come back as <organ>_segmentation and targets_segmentation");
     sub->add_option("--surface-cell-size", o->surface_cell_size, "Paper 001's tetrahedral liver model for clouds: largest circumradius, mm (default 7)");
+    sub->add_option("--field-spacing", o->field_spacing, "Voxel size of the displacement field sent as IMAGE on the command field, mm (default 4)");
     sub->add_flag("--once", o->once, "Stop when the first client disconnects (tests, scripts)");
     sub->callback([o, settings] {
         if (o->client.empty() == (o->port == 0)) fail("serve: give --port (listen) or --client HOST:PORT (connect to a PlusServer), not both");
         if (!o->client.empty() && o->client.rfind(':') == std::string::npos) fail("--client '{}': give HOST:PORT", o->client);
         if (o->client.empty() && (o->port < 1 || o->port > 65535)) fail("--port {} must lie in 1 … 65535", o->port);
         if (o->frame != "ras" && o->frame != "lps") fail("--frame '{}': use ras or lps", o->frame);
+        if (!(o->field_spacing > 0) || !std::isfinite(o->field_spacing)) fail("--field-spacing {} mm must be positive", o->field_spacing);
         const CompressionRegistrationSettings s = settings->resolve();
         validate(s, SettingNaming::option);
         ServeSession session(*o, s);

@@ -243,3 +243,21 @@ def test_paper001_safeguard_leaves_a_sound_answer_alone(surface_in_memory):
     _, result = surface_in_memory
     guard = result.summary["safeguard"]
     assert guard["flags"] == [] and guard["answer"] == "biomechanical", guard
+
+
+def test_paper001_repeated_cloud_points_are_left_out_and_said(surface_through_the_command):
+    """Issue 46's bad input: a cloud that gives points twice (a scanner's overlapping sweeps) is
+    registered as the cloud without the repeats — the same answer — and a note says how many."""
+    out, _ = surface_through_the_command
+    model = physreg.SurfaceModel.from_mesh(physreg.read_mesh(out / "mesh.vtu"))
+    nodes = model.mesh.nodes
+    surface = np.unique(model.surface_triangles)
+    front = surface[nodes[surface, 1] < np.median(nodes[surface, 1])]
+    cloud = nodes[front] + np.array([2.0, -1.0, 0.5])
+    once = physreg.register_partial_surface(physreg.PartialSurfaceCase(model, cloud), **SURFACE)
+    twice = physreg.register_partial_surface(physreg.PartialSurfaceCase(model, np.vstack([cloud, cloud[::3]])), **SURFACE)
+    repeats = len(cloud[::3])
+    assert twice.summary["cloud"]["points"] == len(cloud)
+    assert any(f"{repeats} cloud point(s) given more than once were left out" in n for n in twice.summary["notes"]), twice.summary["notes"]
+    assert not any("more than once" in n for n in once.summary["notes"])
+    assert np.abs(np.asarray(twice.displacement()) - np.asarray(once.displacement())).max() < 1e-9

@@ -374,3 +374,50 @@ def test_a_segmentation_that_is_not_labels_is_refused_on_the_wire(dataset, progr
         assert (kind, device) == ("STRING", "ACK_3") and b"SUCCESS" in body
     p.wait(timeout=60)
     assert p.returncode == 0, p.stderr.read()
+
+
+def test_the_displacement_field_is_sent_on_request(dataset, program):
+    """CMD field: the current state's dense field as IMAGE (float32, 3 components, RAS, origin at
+    the volume's centre). Sampled at the targets' rest positions it gives their served motion."""
+    if not program:
+        skip_or_fail("the physreg program is needed to run the server")
+    p, port = start_server(dataset, program)
+    lps = final_pose_lps(dataset, "A")
+    with socket.create_connection(("127.0.0.1", port), timeout=120) as sock:
+        sock.sendall(transform((-lps[0], -lps[1], lps[2]), timestamp=5))
+        while True:
+            kind, device, stamp, body = read_message(sock)
+            if kind == "POINT":
+                served = targets_from(body)
+                break
+        sock.sendall(command("CMD_7", '<Command Name="field" />', 6))
+        kind, device, stamp, body = read_message(sock)
+        assert (kind, device, stamp) == ("IMAGE", "displacement", 6), (kind, device)
+        ack = read_message(sock)
+        assert ack[:2] == ("STRING", "ACK_7") and b"SUCCESS" in ack[3], ack
+    p.wait(timeout=60)
+    assert p.returncode == 0, p.stderr.read()
+    version, components, scalar, endian, frame, *size = struct.unpack(">HBBBB3H", body[:12])
+    assert (components, scalar, frame) == (3, 10, 1), (components, scalar, frame)
+    matrix = np.array(struct.unpack(">12f", body[12:60]), dtype=float)
+    axes = matrix[:9].reshape(3, 3).T  # columns: the axes times the spacing (RAS)
+    centre = matrix[9:]
+    size = np.array(size)
+    field = np.frombuffer(body[72:], dtype="<f4" if endian == 2 else ">f4").reshape(size[2], size[1], size[0], 3).astype(float)
+    names, rest_positions, _ = physreg.read_landmarks(dataset / "rest" / "landmarks.csv")
+    worst, largest = 0.0, 0.0
+    for name, rest_lps in zip(names, rest_positions):
+        ras = np.array([-rest_lps[0], -rest_lps[1], rest_lps[2]])
+        index = np.linalg.solve(axes, ras - centre) + (size - 1) / 2.0  # continuous (i, j, k)
+        i0 = np.floor(index).astype(int)
+        t = index - i0
+        value = np.zeros(3)
+        for corner in range(8):
+            o = np.array([(corner >> a) & 1 for a in range(3)])
+            w = np.prod(np.where(o, t, 1 - t))
+            i, j, k = i0 + o
+            value += w * field[k, j, i]
+        moved = served[name] - ras
+        worst = max(worst, np.linalg.norm(value - moved))
+        largest = max(largest, np.linalg.norm(moved))
+    assert largest > 0.5 and worst < 0.35 * largest, (worst, largest)  # mm: trilinear on 4 mm voxels

@@ -606,10 +606,53 @@ PartialSurfaceSafeguard judge_deformable_answer(const json& evaluated, const jso
     return g;
 }
 
-PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& c, const PartialSurfaceSettings& settings,
+namespace {
+
+/// Leaves out the points given more than once (the same x, y, z; the first is kept, with its label
+/// and normal) and returns how many: a repeated point would weigh twice in the fit and shrink the
+/// mean spacing that sets the pair stiffness (issue 46's bad input).
+std::size_t drop_duplicate_points(LabelledPointCloud& cloud)
+{
+    const std::size_t n = cloud.points.size();
+    std::vector<std::size_t> order(n);
+    std::iota(order.begin(), order.end(), std::size_t{0});
+    const auto key = [&](std::size_t i) { return std::array<double, 3>{cloud.points[i][0], cloud.points[i][1], cloud.points[i][2]}; };
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key(a) < key(b); });
+    std::vector<std::uint8_t> keep(n, 1);
+    for (std::size_t k = 1; k < n; ++k)
+        if (key(order[k]) == key(order[k - 1])) keep[order[k]] = 0;
+    const auto dropped = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), 0));
+    if (dropped == 0) return 0;
+    LabelledPointCloud out;
+    for (std::size_t i = 0; i < n; ++i) {
+        if (!keep[i]) continue;
+        out.points.push_back(cloud.points[i]);
+        if (i < cloud.labels.size()) out.labels.push_back(cloud.labels[i]);
+        if (i < cloud.normals.size()) out.normals.push_back(cloud.normals[i]);
+    }
+    cloud = std::move(out);
+    return dropped;
+}
+
+} // namespace
+
+PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, const PartialSurfaceSettings& settings,
                                               const std::function<void(double, const std::string&)>& progress)
 {
     const auto start = std::chrono::steady_clock::now();
+    // The case as registered: the cloud without repeated points (reported in the notes).
+    PartialSurfaceCase cleaned;
+    std::size_t duplicates = 0;
+    {
+        LabelledPointCloud cloud = given.cloud;
+        duplicates = drop_duplicate_points(cloud);
+        if (duplicates > 0) {
+            cleaned = given;
+            cleaned.cloud = std::move(cloud);
+            logger()->warn("register-surface: {} cloud point(s) given more than once were left out ({} kept)", duplicates, cleaned.cloud.points.size());
+        }
+    }
+    const PartialSurfaceCase& c = duplicates > 0 ? cleaned : given;
     const auto report = [&](double f, const std::string& m) {
         if (progress) progress(f, m);
     };
@@ -739,6 +782,9 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& c, const
     summary["methods"] = evaluated;
     // What went wrong on the way without ending the run (issue 46: numerical trouble backs a method off).
     summary["notes"] = json::array();
+    if (duplicates > 0)
+        summary["notes"].push_back(fmt::format("{} cloud point(s) given more than once were left out (the first of each kept; {} points registered)", duplicates,
+                                               c.cloud.points.size()));
     if (!b.stopped.empty()) summary["notes"].push_back("biomechanical: " + b.stopped);
     for (const auto& n : decision.notes) summary["notes"].push_back(n);
     summary["seconds"] = seconds_since(start);
