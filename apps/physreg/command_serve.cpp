@@ -236,11 +236,12 @@ std::string mean_dice(const ImageRegistrationResult& r, const std::string& metho
 }
 
 /// The displacement field of every node `u` (3 per node, mm) sampled on a grid over the mesh
-/// (`spacing_mm`) as IMAGE "displacement": float32, 3 components (the displacement in the wire's
+/// (`spacing_mm`, `margin_mm` beyond it: register-compression's grid) as IMAGE "displacement": float32, 3 components (the displacement in the wire's
 /// frame, mm; 0 outside the model), the wire's coordinate system, origin at the volume's centre.
-igtl::ImageMessage::Pointer displacement_image_message(const VolumeMesh& mesh, const std::vector<double>& u, double spacing_mm, double wire)
+igtl::ImageMessage::Pointer displacement_image_message(const VolumeMesh& mesh, const std::vector<double>& u, double spacing_mm, double margin_mm,
+                                                       double wire)
 {
-    const ImageGeometry g = image_grid_over_mesh(mesh, spacing_mm, spacing_mm);
+    const ImageGeometry g = image_grid_over_mesh(mesh, spacing_mm, margin_mm);
     const SampledField f = sample_displacement_field(mesh, u, g);
     auto m = igtl::ImageMessage::New();
     m->SetDeviceName("displacement");
@@ -288,7 +289,6 @@ struct ServeOptions : CommonOptions {
     std::string dataset, parameters, host = "127.0.0.1", frame = "ras", tool = "tool", record, cloud = "cloud", client, segmentation = "segmentation";
     int port = 0;
     double surface_cell_size = PartialSurfaceSettings{}.cell_size;
-    double field_spacing = 4.0;
     bool once = false;
 };
 
@@ -335,6 +335,7 @@ private:
     double m_ready_s = 0.0;
     std::ofstream m_record;
     int m_updates = 0;
+    double m_field_spacing = 1.0; ///< --field-spacing, mm: the field sent on request
     PartialSurfaceSettings m_surface_settings;
     std::optional<SurfaceModel> m_surface_model; // meshed at the first cloud
     std::future<BackgroundAnswer> m_running;
@@ -370,6 +371,7 @@ ServeSession::ServeSession(const ServeOptions& o, const CompressionRegistrationS
     }
     m_surface_settings.cell_size = o.surface_cell_size;
     validate(m_surface_settings, SettingNaming::option);
+    m_field_spacing = s.field_spacing;
 }
 
 void ServeSession::run()
@@ -497,8 +499,10 @@ void ServeSession::answer_command(int fd, const IgtlMessage& message)
         answer = "<Command Status=\"SUCCESS\" Message=\"the model is at rest\"/>";
     } else if (command == "field") {
         // The dense field of the current state, on request only (one solve with the factor for every node).
-        send(fd, displacement_image_message(m_subject.model.mesh, m_condensed->full_displacement_mm(), m_o.field_spacing, m_wire), message.timestamp);
-        answer = fmt::format("<Command Status=\"SUCCESS\" Message=\"IMAGE displacement sent ({} mm voxels)\"/>", m_o.field_spacing);
+        const LiverModel& model = m_subject.model;
+        send(fd, displacement_image_message(model.mesh, m_condensed->full_displacement_mm(), m_field_spacing, 2.0 * model.cell_size_mm.maxCoeff(), m_wire),
+             message.timestamp);
+        answer = fmt::format("<Command Status=\"SUCCESS\" Message=\"IMAGE displacement sent ({} mm voxels)\"/>", m_field_spacing);
     } else if (command == "status") {
         answer = fmt::format("<Command Status=\"SUCCESS\" Updates=\"{}\" Nodes=\"{}\" Frame=\"{}\"/>", m_updates, m_subject.model.mesh.node_count(), m_o.frame);
     } else {
@@ -605,14 +609,12 @@ void add_subcommand_serve(CLI::App& app)
                                                        "dataset's): each is registered by paper 002's pipeline in the background (default 'segmentation'); "
                                                        "the organ surfaces and targets come back as <organ>_segmentation and targets_segmentation");
     sub->add_option("--surface-cell-size", o->surface_cell_size, "Paper 001's tetrahedral liver model for clouds: largest circumradius, mm (default 7)");
-    sub->add_option("--field-spacing", o->field_spacing, "Voxel size of the displacement field sent as IMAGE on the command field, mm (default 4)");
     sub->add_flag("--once", o->once, "Stop when the first client disconnects (tests, scripts)");
     sub->callback([o, settings] {
         if (o->client.empty() == (o->port == 0)) fail("serve: give --port (listen) or --client HOST:PORT (connect to a PlusServer), not both");
         if (!o->client.empty() && o->client.rfind(':') == std::string::npos) fail("--client '{}': give HOST:PORT", o->client);
         if (o->client.empty() && (o->port < 1 || o->port > 65535)) fail("--port {} must lie in 1 … 65535", o->port);
         if (o->frame != "ras" && o->frame != "lps") fail("--frame '{}': use ras or lps", o->frame);
-        if (!(o->field_spacing > 0) || !std::isfinite(o->field_spacing)) fail("--field-spacing {} mm must be positive", o->field_spacing);
         const CompressionRegistrationSettings s = settings->resolve();
         validate(s, SettingNaming::option);
         ServeSession session(*o, s);

@@ -378,7 +378,8 @@ def test_a_segmentation_that_is_not_labels_is_refused_on_the_wire(dataset, progr
 
 def test_the_displacement_field_is_sent_on_request(dataset, program):
     """CMD field: the current state's dense field as IMAGE (float32, 3 components, RAS, origin at
-    the volume's centre). Sampled at the targets' rest positions it gives their served motion."""
+    the volume's centre, on register-compression's grid). Sampled at the targets' rest positions it
+    gives their served motion."""
     if not program:
         skip_or_fail("the physreg program is needed to run the server")
     p, port = start_server(dataset, program)
@@ -420,4 +421,7 @@ def test_the_displacement_field_is_sent_on_request(dataset, program):
         moved = served[name] - ras
         worst = max(worst, np.linalg.norm(value - moved))
         largest = max(largest, np.linalg.norm(moved))
-    assert largest > 0.5 and worst < 0.35 * largest, (worst, largest)  # mm: trilinear on 4 mm voxels
+    print(f"field sampled at the targets: worst {worst:.2e} mm against motions up to {largest:.3f} mm")
+    # mm: register-compression's 1 mm grid, trilinear; measured 2026-11-28 below 5e-4 mm. A wrong
+    # frame, origin or component sign would be off by the motion itself.
+    assert largest > 0.5 and worst < 0.05, (worst, largest)
