@@ -43,6 +43,7 @@ void build_app(CLI::App& app)
     add_subcommand_bench(app);
     add_subcommand_demo(app);
     add_subcommand_settings(app);
+    add_subcommand_prepare(app);
     add_subcommand_serve(app);
     add_subcommand_replay(app);
     app.parse_complete_callback([log_level, quiet, no_report] {

@@ -44,6 +44,7 @@ void add_subcommand_enrich(CLI::App& app);
 void add_subcommand_bench(CLI::App& app);
 void add_subcommand_settings(CLI::App& app);
 void add_subcommand_serve(CLI::App& app);
+void add_subcommand_prepare(CLI::App& app);
 void add_subcommand_replay(CLI::App& app);
 
 using physreg::to_json; ///< ImageGeometry (io/geometry_json.hpp)

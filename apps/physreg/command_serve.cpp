@@ -23,6 +23,7 @@
 #include "physreg/io/dataset.hpp"
 #include "physreg/mesh/faces.hpp"
 #include "physreg/registration/compression/compression_registration.hpp"
+#include "physreg/registration/compression/prepared_model.hpp"
 #include "physreg/registration/surface/partial_surface_registration.hpp"
 #include "physreg/registration/surface/surface_model.hpp"
 
@@ -51,45 +52,6 @@
 
 namespace physreg::cli {
 namespace {
-
-/// The surfaces a display shows: per organ the faces of its cells that border other tissue or
-/// nothing, with their nodes.
-struct OrganSurface {
-    std::string name;
-    std::vector<std::int32_t> nodes;                    ///< model node per surface point
-    std::vector<std::vector<std::uint32_t>> polygons;   ///< surface point indices
-};
-
-std::vector<OrganSurface> organ_surfaces(const LiverModel& model, const LabelRoles& roles)
-{
-    std::vector<std::pair<std::string, std::set<std::int32_t>>> organs;
-    std::set<std::int32_t> liver(roles.liver.begin(), roles.liver.end());
-    liver.insert(roles.lesion.begin(), roles.lesion.end());
-    liver.insert(roles.vessel.begin(), roles.vessel.end());
-    organs.push_back({"liver", liver});
-    if (!roles.lesion.empty()) organs.push_back({"tumours", roles.lesion});
-    if (!roles.vessel.empty()) organs.push_back({"vessels", roles.vessel});
-    const auto faces = match_faces(model.mesh);
-    std::vector<OrganSurface> out;
-    for (const auto& [name, labels] : organs) {
-        OrganSurface s{name, {}, {}};
-        std::map<std::int32_t, std::uint32_t> index;
-        for (const auto& f : faces) {
-            const bool inside = labels.count(model.mesh.cell_labels[f.cell]) > 0;
-            const bool other = f.neighbour < 0 || labels.count(model.mesh.cell_labels[f.neighbour]) == 0;
-            if (!inside || !other) continue;
-            std::vector<std::uint32_t> polygon;
-            for (int k = 0; k < f.node_count(); ++k) {
-                const auto [it, added] = index.emplace(f.nodes[k], static_cast<std::uint32_t>(s.nodes.size()));
-                if (added) s.nodes.push_back(f.nodes[k]);
-                polygon.push_back(it->second);
-            }
-            s.polygons.push_back(std::move(polygon));
-        }
-        if (!s.polygons.empty()) out.push_back(std::move(s));
-    }
-    return out;
-}
 
 void send_message(int fd, igtl::MessageBase* m)
 {
@@ -286,7 +248,7 @@ std::string xml_attribute(const std::string& xml, const std::string& attribute)
 namespace {
 
 struct ServeOptions : CommonOptions {
-    std::string dataset, parameters, host = "127.0.0.1", frame = "ras", tool = "tool", record, cloud = "cloud", client, segmentation = "segmentation";
+    std::string model, dataset, parameters, host = "127.0.0.1", frame = "ras", tool = "tool", record, cloud = "cloud", client, segmentation = "segmentation";
     int port = 0;
     double surface_cell_size = PartialSurfaceSettings{}.cell_size;
     bool once = false;
@@ -328,42 +290,49 @@ private:
     const bool m_client_mode;
     const double m_wire; ///< −1: RAS on the wire (x and y change sign), 1: LPS
     std::chrono::steady_clock::time_point m_t0;
-    CompressionSubject m_subject;
-    std::vector<OrganSurface> m_surfaces;
+    std::unique_ptr<PreparedBodyModel> m_prepared; // a prepared model read, or one made from --dataset at start
+    const CompressionSubject& m_subject;
+    const std::vector<OrganSurface>& m_surfaces;
     Indenter m_tool_shape;
-    std::unique_ptr<CondensedContactModel> m_condensed;
+    CondensedContactModel* m_condensed = nullptr;
     double m_ready_s = 0.0;
     std::ofstream m_record;
     int m_updates = 0;
     double m_field_spacing = 1.0; ///< --field-spacing, mm: the field sent on request
     PartialSurfaceSettings m_surface_settings;
-    std::optional<SurfaceModel> m_surface_model; // meshed at the first cloud
+    std::optional<SurfaceModel>& m_surface_model; // stored by prepare, or meshed at the first cloud
     std::future<BackgroundAnswer> m_running;
     Job m_running_job;
     std::optional<Job> m_waiting;
 };
 
-ServeSession::ServeSession(const ServeOptions& o, const CompressionRegistrationSettings& s)
-    : m_o(o), m_client_mode(!o.client.empty()), m_wire(o.frame == "ras" ? -1.0 : 1.0), m_t0(std::chrono::steady_clock::now())
+/// The served model: read from a prepared folder, or prepared now from a phantom dataset.
+std::unique_ptr<PreparedBodyModel> served_model(const ServeOptions& o, const CompressionRegistrationSettings& s)
 {
+    CondensedContactOptions condensed_options;
+    condensed_options.memory_limit_bytes = s.memory_limit_bytes();
+    if (!o.model.empty()) {
+        if (const auto set = s.model_keys_set(); !set.empty() || !o.parameters.empty())
+            fail("serve: the prepared model '{}' fixes the model; drop {} (prepare it again to change them)", o.model,
+                 o.parameters.empty() ? fmt::format("{}", fmt::join(set, ", ")) : std::string("--parameters"));
+        return read_prepared_model(o.model, condensed_options);
+    }
     const PhantomDataset dataset = read_phantom_dataset(o.dataset);
-    m_subject = read_dataset_compression_subject(o.dataset, s, o.parameters);
-    const LiverModel& model = m_subject.model;
     std::vector<Indenter> session_tools;
     for (const auto& st : dataset.states)
         if (st.tool && st.kind == "compression") session_tools.push_back(*st.tool);
     if (session_tools.empty()) fail("serve: dataset '{}' has no tool compression (the tool's shape and the session's paths)", o.dataset);
-    m_tool_shape = session_tools.front();
-    // The nodes each update returns: every organ surface's, and those the targets read.
-    m_surfaces = organ_surfaces(model, m_subject.roles);
-    std::set<std::int32_t> wanted;
-    for (const auto& surface : m_surfaces) wanted.insert(surface.nodes.begin(), surface.nodes.end());
-    std::vector<Vec3> targets;
-    for (const auto& l : m_subject.rest_landmarks) targets.push_back(l.position);
-    for (const auto n : nodes_near(model.mesh, targets, 2.0 * model.cell_size_mm.maxCoeff())) wanted.insert(n);
-    CondensedContactOptions condensed_options;
-    condensed_options.memory_limit_bytes = s.memory_limit_bytes();
-    m_condensed = std::make_unique<CondensedContactModel>(model, session_tools, std::vector<std::int32_t>(wanted.begin(), wanted.end()), condensed_options);
+    PreparedModelOptions options;
+    options.condensed = condensed_options;
+    options.surface_cell_size_mm = 0.0; // meshed at the first cloud
+    return prepare_body_model(read_dataset_compression_subject(o.dataset, s, o.parameters), std::move(session_tools), options);
+}
+
+ServeSession::ServeSession(const ServeOptions& o, const CompressionRegistrationSettings& s)
+    : m_o(o), m_client_mode(!o.client.empty()), m_wire(o.frame == "ras" ? -1.0 : 1.0), m_t0(std::chrono::steady_clock::now()),
+      m_prepared(served_model(o, s)), m_subject(m_prepared->subject), m_surfaces(m_prepared->surfaces), m_tool_shape(m_prepared->session_tools.front()),
+      m_condensed(m_prepared->condensed.get()), m_surface_model(m_prepared->surface_model)
+{
     m_ready_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - m_t0).count();
     if (!o.record.empty()) {
         m_record.open(o.record);
@@ -592,7 +561,9 @@ void add_subcommand_serve(CLI::App& app)
     auto o = std::make_shared<ServeOptions>();
     auto* sub = app.add_subcommand("serve", "Paper 000 live over OpenIGTLink: tool poses (TRANSFORM) in, the body model's organ surfaces "
                                             "(POLYDATA) and targets (POINT) out, by condensed contact");
-    sub->add_option("--dataset", o->dataset, "Phantom dataset: the body at rest, its landmarks, the tool and the session's paths")->required();
+    sub->add_option("model", o->model, "A model made by physreg prepare (starts in seconds)");
+    sub->add_option("--dataset", o->dataset, "Instead of MODEL, a phantom dataset: the body at rest, its landmarks, the tool and the session's paths "
+                                             "(the model is prepared at start: about a minute on cirs057a)");
     sub->add_option("--parameters", o->parameters, "Parameter file from physreg estimate (else the model settings)");
     auto settings = std::make_shared<SettingsOptions<CompressionRegistrationSettings>>(sub, compression_spec());
     sub->add_option("--port", o->port, "TCP port to listen on (Slicer and PLUS default to 18944; give it only when asked)");
@@ -611,6 +582,7 @@ void add_subcommand_serve(CLI::App& app)
     sub->add_option("--surface-cell-size", o->surface_cell_size, "Paper 001's tetrahedral liver model for clouds: largest circumradius, mm (default 7)");
     sub->add_flag("--once", o->once, "Stop when the first client disconnects (tests, scripts)");
     sub->callback([o, settings] {
+        if (o->model.empty() == o->dataset.empty()) fail("serve: give a prepared MODEL (physreg prepare) or --dataset DIR, not both");
         if (o->client.empty() == (o->port == 0)) fail("serve: give --port (listen) or --client HOST:PORT (connect to a PlusServer), not both");
         if (!o->client.empty() && o->client.rfind(':') == std::string::npos) fail("--client '{}': give HOST:PORT", o->client);
         if (o->client.empty() && (o->port < 1 || o->port > 65535)) fail("--port {} must lie in 1 … 65535", o->port);

@@ -425,3 +425,70 @@ def test_the_displacement_field_is_sent_on_request(dataset, program):
     # mm: register-compression's 1 mm grid, trilinear; measured 2026-11-28 below 5e-4 mm. A wrong
     # frame, origin or component sign would be off by the motion itself.
     assert largest > 0.5 and worst < 0.05, (worst, largest)
+
+
+def test_a_prepared_model_serves_as_the_dataset_does_and_bad_models_are_refused(dataset, program, tmp_path):
+    """physreg prepare (issue 44 item 3): the model built once and stored; serve MODEL answers a pose
+    as the command does, without factorising (the field on request makes the factor then). A
+    stored model that is corrupt, missing or given beside model settings is refused, naming why."""
+    if not program:
+        skip_or_fail("the physreg program is needed")
+    model = tmp_path / "model"
+    r = subprocess.run([program, "-q", "prepare", "--dataset", str(dataset), "--grid", GRID, "-o", str(model), "--json"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)
+    assert summary["candidate_nodes"] > 10 and summary["timings_s"]["compliance"] > 0
+    manifest = json.loads((model / "prepared.json").read_text())
+    assert manifest["format"] == "physreg-prepared-model" and manifest["surface_model"]["tetrahedra"] > 100
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    started = time.time()
+    p = subprocess.Popen([program, "--log-level", "info", "serve", str(model), "--port", str(port), "--once"], stderr=subprocess.PIPE, text=True)
+    lines = []
+    while not lines or "listening" not in lines[-1]:
+        lines.append(p.stderr.readline())
+        assert lines[-1], lines
+    ready_s = time.time() - started
+    lps = final_pose_lps(dataset, "A")
+    with socket.create_connection(("127.0.0.1", port), timeout=120) as sock:
+        sock.sendall(transform((-lps[0], -lps[1], lps[2]), timestamp=11))
+        while True:
+            kind, device, stamp, body = read_message(sock)
+            if kind == "POINT":
+                served = targets_from(body)
+                break
+        sock.sendall(command("CMD_2", '<Command Name="field" />', 12))
+        kind, device, stamp, body = read_message(sock)
+        assert (kind, device, stamp) == ("IMAGE", "displacement", 12), (kind, device)
+        assert read_message(sock)[:2] == ("STRING", "ACK_2")
+    p.wait(timeout=120)
+    log = "".join(lines) + p.stderr.read()
+    assert p.returncode == 0, log
+    assert "factorising the stiffness" in log, log  # made on demand, for the field
+    subject = physreg.CompressionSubject.from_dataset(dataset, grid=GRID)
+    expected = physreg.predict_compression(subject, physreg.CompressionCase.from_dataset(dataset, "A"), solver="condensed")
+    worst = max(np.linalg.norm(np.array([-served[n][0], -served[n][1], served[n][2]]) - np.array(q)) for n, q in expected.landmarks.items())
+    assert worst < 0.01, worst  # mm (float32 on the wire)
+    print(f"serve MODEL ready in {ready_s:.2f} s (prepare took {summary['seconds']:.1f} s)")
+
+    # Model settings beside a prepared model, a model folder without its manifest, a corrupt compliance file.
+    r = subprocess.run([program, "serve", str(model), "--port", str(port), "--grid", "10x10x10"], capture_output=True, text=True)
+    assert r.returncode == 1 and "fixes the model; drop grid" in r.stderr, r.stderr
+    r = subprocess.run([program, "serve", str(tmp_path), "--port", str(port)], capture_output=True, text=True)
+    assert r.returncode == 1 and "no prepared.json" in r.stderr, r.stderr
+    r = subprocess.run([program, "serve", str(model), "--dataset", str(dataset), "--port", str(port)], capture_output=True, text=True)
+    assert r.returncode == 1 and "not both" in r.stderr, r.stderr
+    data = (model / "condensed.bin").read_bytes()
+    (model / "condensed.bin").write_bytes(data[: len(data) // 2])
+    r = subprocess.run([program, "serve", str(model), "--port", str(port)], capture_output=True, text=True)
+    assert r.returncode == 1 and "condensed.bin" in r.stderr and "checksum" in r.stderr, r.stderr
+    # prepare's own bad input: a label map without a tool path, a path that is no path.
+    r = subprocess.run([program, "prepare", "--labels", str(dataset / "rest" / "labels.nii.gz"), "--tool-radius", "10", "-o", str(tmp_path / "m2")],
+                       capture_output=True, text=True)
+    assert r.returncode == 1 and "at least one --tool-path" in r.stderr, r.stderr
+    r = subprocess.run([program, "prepare", "--labels", str(dataset / "rest" / "labels.nii.gz"), "--tool-radius", "10", "--tool-path", "1,2;3,4,5",
+                        "-o", str(tmp_path / "m2")], capture_output=True, text=True)
+    assert r.returncode == 1 and "each point is x,y,z" in r.stderr, r.stderr
+    assert not (tmp_path / "m2").exists()

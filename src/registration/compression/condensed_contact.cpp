@@ -62,6 +62,7 @@ struct CondensedContactModel::Factor {
     SparseMatrix k;
     SymmetricSolver solver{LinearSolverOptions{LinearSolverKind::cholmod}};
     std::vector<char> constrained; ///< per dof
+    bool factorised = false;       ///< a model from stored compliance factorises when first needed
 };
 
 std::vector<std::int32_t> nodes_near(const VolumeMesh& mesh, const std::vector<Vec3>& points, double radius_mm)
@@ -100,19 +101,9 @@ CondensedContactModel::CondensedContactModel(const LiverModel& model, const std:
     : m_model(model), m_options(options), m_factor(std::make_unique<Factor>()), m_query(std::move(query_nodes))
 {
     options.validate();
-    if (!model.tled) fail("condensed contact: the model has no mechanics");
     if (session_tools.empty()) fail("condensed contact: no tool path given (the candidates lie near the session's tools)");
-    const std::size_t nodes = model.mesh.node_count(), dofs = 3 * nodes;
-    for (const auto q : m_query)
-        if (q < 0 || static_cast<std::size_t>(q) >= nodes) fail("condensed contact: query node {} out of range (0 … {})", q, nodes - 1);
-
-    // Supports: held dofs get an identity row and column (their displacement stays 0).
-    auto& constrained = m_factor->constrained;
-    constrained.assign(dofs, 0);
-    for (const auto& c : model.supports())
-        for (const auto n : c.nodes)
-            for (int d = 0; d < 3; ++d)
-                if (c.dofs[static_cast<std::size_t>(d)]) constrained[3 * static_cast<std::size_t>(n) + static_cast<std::size_t>(d)] = 1;
+    assemble_at_rest();
+    const auto& constrained = m_factor->constrained;
 
     // Candidates: free surface nodes within the tool's reach + the margin of a session path.
     for (const auto& t : session_tools) {
@@ -136,10 +127,70 @@ CondensedContactModel::CondensedContactModel(const LiverModel& model, const std:
     }
     if (m_candidates.empty()) fail("condensed contact: no surface node lies within the tools' reach (+{} mm) of their paths", options.candidate_margin_mm);
 
+    std::vector<std::int32_t> candidates;
+    candidates.swap(m_candidates);
+    factorise(candidates.size());
+    // Compliance columns of the candidate dofs.
+    const auto t0 = std::chrono::steady_clock::now();
+    m_query_u.assign(3 * m_query.size(), 0.0);
+    add_candidates(candidates);
+    m_pre.compliance_s = seconds_since(t0);
+    m_pre.query_nodes = m_query.size();
+}
+
+CondensedContactModel::CondensedContactModel(const LiverModel& model, CondensedCompliance stored, const CondensedContactOptions& options)
+    : m_model(model), m_options(options), m_factor(std::make_unique<Factor>()), m_candidates(std::move(stored.candidates)),
+      m_query(std::move(stored.query)), m_outside(std::move(stored.outside)), m_wcc(std::move(stored.wcc)), m_wqc(std::move(stored.wqc)),
+      m_pre(stored.precomputation)
+{
+    options.validate();
+    assemble_at_rest();
+    const std::size_t nodes = model.mesh.node_count();
+    const auto c3 = static_cast<Eigen::Index>(3 * m_candidates.size()), q3 = static_cast<Eigen::Index>(3 * m_query.size());
+    if (stored.dofs != 3 * nodes)
+        fail("condensed contact: the stored compliance was computed for {} unknowns, the model has {} (another model)", stored.dofs, 3 * nodes);
+    for (const auto* list : {&m_candidates, &m_query, &m_outside})
+        for (const auto n : *list)
+            if (n < 0 || static_cast<std::size_t>(n) >= nodes) fail("condensed contact: stored node {} out of range (0 … {})", n, nodes - 1);
+    if (m_candidates.empty() || m_wcc.rows() != c3 || m_wcc.cols() != c3 || m_wqc.rows() != q3 || m_wqc.cols() != c3)
+        fail("condensed contact: the stored compliance blocks ({}×{}, {}×{}) do not match {} candidates and {} query nodes", m_wcc.rows(), m_wcc.cols(),
+             m_wqc.rows(), m_wqc.cols(), m_candidates.size(), m_query.size());
+    std::size_t held = 0;
+    for (const char c : m_factor->constrained) held += c ? 1 : 0;
+    const double probe = stiffness_probe();
+    if (held != stored.constrained_dofs || !(std::abs(probe - stored.stiffness_probe) <= 1e-9 * std::max(std::abs(probe), std::abs(stored.stiffness_probe))))
+        fail("condensed contact: the stored compliance belongs to another stiffness (held unknowns {} vs {}, stiffness probe {:.12g} vs {:.12g}): "
+             "prepare the model again with this version of physreg",
+             stored.constrained_dofs, held, stored.stiffness_probe, probe);
+    for (Eigen::Index i = 0; i < m_wcc.size(); ++i)
+        if (!std::isfinite(m_wcc.data()[i])) fail("condensed contact: the stored compliance holds a non-finite value");
+    for (Eigen::Index i = 0; i < m_wqc.size(); ++i)
+        if (!std::isfinite(m_wqc.data()[i])) fail("condensed contact: the stored compliance holds a non-finite value");
+    m_least_compliance = 1e-12 * m_wcc.diagonal().maxCoeff();
+    m_force = Eigen::VectorXd::Zero(c3);
+    m_lambda.assign(m_candidates.size(), 0.0);
+    m_query_u.assign(3 * m_query.size(), 0.0);
+    m_pre.factorisation_s = 0.0; // not factorised (yet): the factor is made when first needed
+    m_pre.compliance_s = 0.0;
+}
+
+void CondensedContactModel::assemble_at_rest()
+{
+    if (!m_model.tled) fail("condensed contact: the model has no mechanics");
+    const std::size_t nodes = m_model.mesh.node_count(), dofs = 3 * nodes;
+    for (const auto q : m_query)
+        if (q < 0 || static_cast<std::size_t>(q) >= nodes) fail("condensed contact: query node {} out of range (0 … {})", q, nodes - 1);
+    // Supports: held dofs get an identity row and column (their displacement stays 0).
+    auto& constrained = m_factor->constrained;
+    constrained.assign(dofs, 0);
+    for (const auto& c : m_model.supports())
+        for (const auto n : c.nodes)
+            for (int d = 0; d < 3; ++d)
+                if (c.dofs[static_cast<std::size_t>(d)]) constrained[3 * static_cast<std::size_t>(n) + static_cast<std::size_t>(d)] = 1;
     // The tangent at rest (the model's law linearised), supports eliminated.
-    auto t0 = std::chrono::steady_clock::now();
-    const PenaltyCoupling* coupling = model.coupling.points().empty() ? nullptr : &model.coupling;
-    StiffnessAssembler assembler(*model.tled, coupling);
+    const auto t0 = std::chrono::steady_clock::now();
+    const PenaltyCoupling* coupling = m_model.coupling.points().empty() ? nullptr : &m_model.coupling;
+    StiffnessAssembler assembler(*m_model.tled, coupling);
     SparseMatrix& k = m_factor->k;
     k = assembler.make_matrix();
     std::vector<double> zero(dofs, 0.0), force(dofs, 0.0);
@@ -149,32 +200,66 @@ CondensedContactModel::CondensedContactModel(const LiverModel& model, const std:
         for (SparseMatrix::InnerIterator it(k, j); it; ++it)
             if (constrained[static_cast<std::size_t>(it.row())] || constrained[static_cast<std::size_t>(j)]) it.valueRef() = it.row() == j ? 1.0 : 0.0;
     m_pre.assembly_s = seconds_since(t0);
+    m_pre.dofs = dofs;
+}
+
+void CondensedContactModel::factorise(std::size_t candidates) const
+{
     // The memory the precomputation will take, from CHOLMOD's analysis, before anything large is made.
+    const SparseMatrix& k = m_factor->k;
     const double analysed_nonzeros = m_factor->solver.analyse(k);
-    const std::size_t limit = effective_memory_limit(options.memory_limit_bytes);
-    const std::size_t needed = condensed_memory_bytes(dofs, analysed_nonzeros, static_cast<std::size_t>(k.nonZeros()), m_candidates.size(), m_query.size());
-    refuse_over_limit(needed, limit, analysed_nonzeros, dofs, m_candidates.size(), m_query.size());
-    t0 = std::chrono::steady_clock::now();
+    const std::size_t limit = effective_memory_limit(m_options.memory_limit_bytes);
+    const std::size_t needed = condensed_memory_bytes(m_pre.dofs, analysed_nonzeros, static_cast<std::size_t>(k.nonZeros()), candidates, m_query.size());
+    refuse_over_limit(needed, limit, analysed_nonzeros, m_pre.dofs, candidates, m_query.size());
+    const auto t0 = std::chrono::steady_clock::now();
     if (m_factor->solver.factorise(k).shift > 0)
         fail("condensed contact: the stiffness at rest is not positive definite (CHOLMOD needed a shift): is the model held against rigid motion?");
     m_pre.factorisation_s = seconds_since(t0);
-
     m_pre.factor_nonzeros = analysed_nonzeros;
     m_pre.memory_limit_bytes = limit;
+    m_pre.memory_bytes = needed;
+    m_factor->factorised = true;
+}
 
-    // Compliance columns of the candidate dofs.
-    t0 = std::chrono::steady_clock::now();
-    std::vector<std::int32_t> candidates;
-    candidates.swap(m_candidates);
-    m_query_u.assign(3 * m_query.size(), 0.0);
-    add_candidates(candidates);
-    m_pre.compliance_s = seconds_since(t0);
-    m_pre.dofs = dofs;
-    m_pre.query_nodes = m_query.size();
+void CondensedContactModel::ensure_factor() const
+{
+    if (m_factor->factorised) return;
+    logger()->info("condensed contact: factorising the stiffness ({} unknowns; the stored compliance needed none until now)", m_pre.dofs);
+    factorise(m_candidates.size());
+}
+
+bool CondensedContactModel::factorised() const { return m_factor->factorised; }
+
+double CondensedContactModel::stiffness_probe() const
+{
+    // vᵀ K w for two fixed vectors: equal for equal stiffnesses, and a change of any entry shows
+    // (K's nonzeros are assembled in a fixed order, so this is reproducible to rounding).
+    const SparseMatrix& k = m_factor->k;
+    double sum = 0.0;
+    for (int j = 0; j < k.outerSize(); ++j)
+        for (SparseMatrix::InnerIterator it(k, j); it; ++it)
+            sum += std::sin(0.7 * double(it.row()) + 0.3) * it.value() * std::cos(1.3 * double(j) + 0.1);
+    return sum;
+}
+
+CondensedCompliance CondensedContactModel::compliance() const
+{
+    CondensedCompliance c;
+    c.candidates = m_candidates;
+    c.query = m_query;
+    c.outside = m_outside;
+    c.wcc = m_wcc;
+    c.wqc = m_wqc;
+    c.dofs = m_pre.dofs;
+    for (const char h : m_factor->constrained) c.constrained_dofs += h ? 1 : 0;
+    c.stiffness_probe = stiffness_probe();
+    c.precomputation = m_pre;
+    return c;
 }
 
 void CondensedContactModel::add_candidates(const std::vector<std::int32_t>& added)
 {
+    ensure_factor();
     const std::size_t dofs = m_factor->constrained.size();
     const auto& constrained = m_factor->constrained;
     const auto old3 = static_cast<Eigen::Index>(3 * m_candidates.size());
@@ -441,6 +526,7 @@ std::vector<double> CondensedContactModel::query_field_mm() const
 
 std::vector<double> CondensedContactModel::full_displacement_mm() const
 {
+    ensure_factor();
     const std::size_t dofs = m_factor->constrained.size();
     Eigen::VectorXd f = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(dofs));
     for (std::size_t j = 0; j < m_candidates.size(); ++j)

@@ -20,6 +20,8 @@
 
 #include <cstdio>
 #include <fstream>
+#include <iterator>
+#include <unistd.h>
 
 namespace physreg {
 namespace {
@@ -449,6 +451,79 @@ TEST(BodyModel, ACondensedToolOffTheSessionPathsAddsItsNodesAndGivesTheFullAnswe
         EXPECT_NE(what.find("over the memory limit of 1.0 MiB"), std::string::npos) << what;
         EXPECT_NE(what.find("needs ≈"), std::string::npos) << what;
     }
+}
+
+TEST(BodyModel, StoredCondensedComplianceAnswersAsTheOriginalAndRefusesAnotherModel)
+{
+    // physreg prepare → serve (issue 44 item 3): the compliance blocks written, read back and
+    // given to a model that was never factorised answer every update exactly as the original does;
+    // the factor is made only when the whole field is asked for. Corrupt, truncated or foreign
+    // files are refused with the file named.
+    const BodyDataset* d = body_dataset();
+    if (!d) PHYSREG_MISSING_FIXTURE("PHYSREG_TEST_PHANTOM is not set (ctest's fixture.phantom_small sets it)");
+    const auto cases = compression_cases(d->dataset, {"B"});
+    const LiverModel body = build_liver_model(d->labels, d->dataset.roles, coarse_body_model(), "small rest");
+    std::vector<Vec3> around;
+    for (const auto& l : d->rest) around.push_back(l.position);
+    const auto query = nodes_near(body.mesh, around, 2.0 * body.cell_size_mm.maxCoeff());
+    CondensedContactModel original(body, {cases[0].tool}, query);
+    const auto dir = std::filesystem::temp_directory_path() / ("physreg_condensed_" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir);
+    const auto file = dir / "condensed.bin";
+    write_condensed_compliance(file, original.compliance());
+    CondensedContactModel stored(body, read_condensed_compliance(file));
+    EXPECT_FALSE(stored.factorised());
+    const Indenter& tool = cases[0].tool;
+    const Vec3 direction = (tool.path.back() - tool.path.front()).normalized();
+    for (int step = 1; step <= 4; ++step) {
+        const Vec3 at = tool.path.front() + 1.5 * step * direction;
+        const auto a = original.move_to(tool, at);
+        const auto b = stored.move_to(tool, at);
+        EXPECT_EQ(a.active_nodes, b.active_nodes);
+        EXPECT_EQ(original.query_displacement_mm(), stored.query_displacement_mm()) << "step " << step; // bit for bit: the same blocks
+    }
+    EXPECT_FALSE(stored.factorised()) << "tool updates on the session's path need no factor";
+    const auto full_a = original.full_displacement_mm(), full_b = stored.full_displacement_mm();
+    EXPECT_TRUE(stored.factorised());
+    double difference = 0.0, largest = 0.0;
+    for (std::size_t i = 0; i < full_a.size(); ++i) {
+        difference = std::max(difference, std::abs(full_a[i] - full_b[i]));
+        largest = std::max(largest, std::abs(full_a[i]));
+    }
+    EXPECT_GT(largest, 0.1);
+    EXPECT_LT(difference, 1e-10 * largest);
+
+    // Bad files: truncated, one byte changed, not ours; and blocks of another model.
+    std::string bytes;
+    {
+        std::ifstream in(file, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+    const auto expect_refused = [&](const std::string& content, const std::string& words) {
+        std::ofstream(dir / "bad.bin", std::ios::binary) << content;
+        try {
+            (void)read_condensed_compliance(dir / "bad.bin");
+            ADD_FAILURE() << "accepted: " << words;
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
+            EXPECT_NE(std::string(e.what()).find("bad.bin"), std::string::npos) << e.what();
+        }
+    };
+    expect_refused(bytes.substr(0, bytes.size() / 2), "checksum");
+    std::string flipped = bytes;
+    flipped[flipped.size() / 3] ^= 0x10;
+    expect_refused(flipped, "checksum");
+    expect_refused("not a physreg file at all", "wrong magic");
+    ModelParameters other = coarse_body_model();
+    other.body_young_pa *= 2.0; // same mesh, another stiffness
+    const LiverModel stiffer = build_liver_model(d->labels, d->dataset.roles, other, "small rest, stiffer gel");
+    try {
+        CondensedContactModel wrong(stiffer, read_condensed_compliance(file));
+        ADD_FAILURE() << "blocks of another stiffness were accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("another stiffness"), std::string::npos) << e.what();
+    }
+    std::filesystem::remove_all(dir);
 }
 
 TEST(BodyModel, APartialLiverSurfaceCloudDrivesTheBodyModel)

@@ -19,6 +19,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -60,6 +61,21 @@ struct CondensedPrecomputation {
     double extension_s = 0.0;
 };
 
+/// What a condensed model keeps after its precomputation: enough to answer tool updates with no
+/// factor (physreg prepare stores it, serve starts from it). The stiffness probe (vᵀ K w for fixed
+/// vectors) and the held unknowns tie it to the stiffness it came from.
+struct CondensedCompliance {
+    std::vector<std::int32_t> candidates, query, outside;
+    Eigen::MatrixXd wcc, wqc; ///< mm/N
+    std::size_t dofs = 0, constrained_dofs = 0;
+    double stiffness_probe = 0.0;
+    CondensedPrecomputation precomputation;
+};
+/// A binary file of its own (magic, version, sizes, arrays, a checksum). Reading checks sizes
+/// against the file's length before allocating, and the checksum; throws Error naming the file.
+void write_condensed_compliance(const std::filesystem::path& path, const CondensedCompliance& compliance);
+CondensedCompliance read_condensed_compliance(const std::filesystem::path& path);
+
 class CondensedContactModel {
 public:
     /// `session_tools`: every tool path of the session (candidates lie near them); `query_nodes`:
@@ -67,8 +83,17 @@ public:
     /// tools, when the stiffness cannot be factored, or for shapes without a finite reach.
     CondensedContactModel(const LiverModel& model, const std::vector<Indenter>& session_tools, std::vector<std::int32_t> query_nodes,
                           const CondensedContactOptions& options = {});
+    /// From stored compliance (physreg prepare): the stiffness is assembled (fractions of a second)
+    /// and checked against the one the blocks came from, and not factorised until something needs
+    /// the factor (the whole field, candidates added for a tool off the session's paths). Throws
+    /// Error for blocks of another model or of another size.
+    CondensedContactModel(const LiverModel& model, CondensedCompliance stored, const CondensedContactOptions& options = {});
     ~CondensedContactModel();
     CondensedContactModel(CondensedContactModel&&) noexcept;
+    /// The blocks and node lists this model answers from (what prepare stores).
+    CondensedCompliance compliance() const;
+    /// Whether the stiffness has been factorised (a model from stored compliance: only once needed).
+    bool factorised() const;
 
     struct Update {
         int active_nodes = 0;        ///< candidates in contact (λ > 0)
@@ -108,6 +133,12 @@ private:
     /// Appends `added` to the candidates: their compliance columns by solves with the factor, the
     /// old candidates' rows of them by symmetry. Checks the memory limit first.
     void add_candidates(const std::vector<std::int32_t>& added);
+    /// The supports and the tangent stiffness at rest (supports eliminated).
+    void assemble_at_rest();
+    /// CHOLMOD's analysis (the memory limit checked for `candidates`) and factorisation.
+    void factorise(std::size_t candidates) const;
+    void ensure_factor() const;
+    double stiffness_probe() const;
 
     struct Factor;
     const LiverModel& m_model;
@@ -121,7 +152,7 @@ private:
     double m_least_compliance = 0.0; ///< below this a candidate cannot move along a normal (held), mm/N
     std::vector<double> m_lambda; ///< per candidate: last λ (warm start)
     std::vector<double> m_query_u;
-    CondensedPrecomputation m_pre;
+    mutable CondensedPrecomputation m_pre; // the factor's figures are filled in when it is made
 };
 
 /// A compression predicted by condensed contact (`register-compression --solver condensed`): the
