@@ -76,7 +76,12 @@ def run_dataset(spec):
     cmd = [args.physreg, "-q", "--no-report", "phantom", *body, "--seed", str(spec["seed"]),
            "--tool-radius", str(spec["radius_mm"]), "--depths", ",".join(str(d) for d in spec["depths_mm"]),
            "--materials", spec["materials"], "--insufflation-pa", "0", "--no-calculix", "-o", folder, "--force"]
-    rc, seconds = run(cmd, folder + ".phantom.log")
+    previous = folder + ".phantom.json"
+    if os.path.exists(os.path.join(folder, "manifest.json")) and os.path.exists(previous) and json.load(open(previous))["cmd"] == cmd:
+        rc, seconds = 0, json.load(open(previous))["seconds"]  # the dataset made before: only the registrations run again
+    else:
+        rc, seconds = run(cmd, folder + ".phantom.log")
+        json.dump({"cmd": cmd, "seconds": seconds, "exit": rc}, open(previous, "w"))
     result = dict(spec, phantom_exit=rc, phantom_s=round(seconds, 1), states=[])
     if rc != 0:
         result["phantom_error"] = last_error(folder + ".phantom.log")

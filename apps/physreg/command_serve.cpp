@@ -19,6 +19,7 @@
 #include "settings_options.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/core/interrupt.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/io/dataset.hpp"
 #include "physreg/mesh/faces.hpp"
@@ -42,6 +43,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <deque>
 #include <cmath>
 #include <cstring>
 #include <future>
@@ -52,12 +54,6 @@
 
 namespace physreg::cli {
 namespace {
-
-void send_message(int fd, igtl::MessageBase* m)
-{
-    m->Pack();
-    if (!send_all(fd, m->GetPackPointer(), static_cast<std::size_t>(m->GetPackSize()))) fail("OpenIGTLink: the client went away while answering");
-}
 
 void stamp(igtl::MessageBase* m, std::uint64_t timestamp)
 {
@@ -250,18 +246,36 @@ namespace {
 struct ServeOptions : CommonOptions {
     std::string model, dataset, parameters, host = "127.0.0.1", frame = "ras", tool = "tool", record, cloud = "cloud", client, segmentation = "segmentation";
     int port = 0;
+    int max_clients = 4;
+    double queue_mib = 64.0;
     double surface_cell_size = PartialSurfaceSettings{}.cell_size;
     bool once = false;
 };
 
+/// One connection: a tracker, a display (3D Slicer), a script, or the PlusServer in client mode.
+/// What goes out waits in a bounded queue sent without blocking, so that a client that never reads
+/// cannot hold up the others: a message that would overflow its queue is dropped and counted.
+struct ServeClient {
+    int id = 0;
+    Descriptor fd;
+    std::deque<std::vector<std::uint8_t>> outgoing;
+    std::size_t queued_bytes = 0, front_sent = 0;
+    std::uint64_t dropped_messages = 0;
+    int warned_rotation = 0; ///< poses whose rotation was not rigid (said once)
+    bool gone = false;
+    explicit ServeClient(int i, int descriptor) : id(i), fd(descriptor) {}
+};
+
 /// One served model and the sessions on it: the body model with its condensed contact (paper 000),
-/// the liver model for clouds (paper 001, meshed at the first cloud) and the registrations of clouds
-/// and segmentations (paper 002) that run in the background, one at a time (the latest input
-/// waiting replaces older ones).
+/// the liver model for clouds (paper 001, stored by prepare or meshed at the first cloud) and the
+/// registrations of clouds and segmentations (paper 002) that run in the background, one at a time
+/// (the latest input waiting replaces older ones). Up to --max-clients connections at once: model
+/// updates go to every client, answers to commands and refusals to the client that asked.
 class ServeSession {
 public:
     ServeSession(const ServeOptions& o, const CompressionRegistrationSettings& s);
-    /// Listens (or connects, in client mode) and serves until the connection that ends it.
+    /// Listens (or connects, in client mode) and serves until the session ends (--once: the last
+    /// client left; client mode: the server closed) or SIGINT/SIGTERM (then Interrupted).
     void run();
 
 private:
@@ -269,20 +283,34 @@ private:
         std::function<BackgroundAnswer()> run;
         std::string device;
         std::uint64_t timestamp = 0;
+        int client = 0; ///< who sent the input (its refusal goes there)
     };
-    void serve_connection(int fd);
-    /// Stamps `m` with `timestamp`, sends it and records it.
-    void send(int fd, igtl::MessageBase* m, std::uint64_t timestamp);
+    struct Pose {
+        IgtlMessage message;
+        int client = 0;
+    };
+    /// Reads what `c` has sent: poses into `latest` (an older one there is dropped), other messages
+    /// handled in order (a pose waiting is answered first). A malformed stream: a STATUS to that
+    /// client, its connection closed.
+    void read_from(ServeClient& c, std::optional<Pose>& latest, int& dropped);
+    void handle(ServeClient& c, const IgtlMessage& message);
+    void answer_pose(const Pose& pose, int dropped);
+    void answer_command(ServeClient& c, const IgtlMessage& message);
+    /// Stamps, packs and queues `m` for one client (or every client), recorded once.
+    void send_to(ServeClient& c, igtl::MessageBase* m, std::uint64_t timestamp);
+    void broadcast(igtl::MessageBase* m, std::uint64_t timestamp);
+    /// Model updates (`droppable`) are dropped past the queue's bound; answers to the client's own requests never are.
+    void enqueue(ServeClient& c, const std::uint8_t* bytes, std::size_t n, bool droppable);
+    /// Sends what the socket takes now, without blocking.
+    void flush(ServeClient& c);
+    ServeClient* client(int id);
     /// One JSON line per message in --record; what came in with its bytes (hex), so that `physreg
     /// replay` can send the session again at its own pace.
     void record(const char* direction, const std::string& type, const std::string& device, std::uint64_t timestamp,
                 const std::vector<std::uint8_t>* raw = nullptr);
-    /// The latest of the queued poses (stale ones dropped; a non-pose message read meanwhile goes to `pending`), answered.
-    void answer_pose(int fd, IgtlMessage message, std::optional<IgtlMessage>& pending);
-    void answer_command(int fd, const IgtlMessage& message);
     void queue(Job job);
     /// A finished background registration's answer sent (or its refusal as a STATUS), the next one started.
-    void deliver_background(int fd);
+    void deliver_background();
     BackgroundAnswer register_cloud(const LabelledPointCloud& cloud);
     BackgroundAnswer register_segmentation(const LabelVolume& labels);
 
@@ -304,6 +332,9 @@ private:
     std::future<BackgroundAnswer> m_running;
     Job m_running_job;
     std::optional<Job> m_waiting;
+    std::vector<std::unique_ptr<ServeClient>> m_clients;
+    int m_next_client = 1;
+    std::uint64_t m_dropped_messages = 0, m_dropped_poses = 0;
 };
 
 /// The served model: read from a prepared folder, or prepared now from a phantom dataset.
@@ -353,68 +384,199 @@ void ServeSession::run()
         sockaddr_in address{};
         address.sin_family = AF_INET;
         address.sin_port = htons(static_cast<std::uint16_t>(m_o.port));
-        if (::inet_pton(AF_INET, m_o.host.c_str(), &address.sin_addr) != 1) fail("--host '{}' is not an IPv4 address", m_o.host);
+        if (::inet_pton(AF_INET, m_o.host.c_str(), &address.sin_addr) != 1) fail("--bind '{}' is not an IPv4 address", m_o.host);
         if (::bind(listener.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0)
             fail("--port {}: cannot listen on {}:{}: {}", m_o.port, m_o.host, m_o.port, std::strerror(errno));
-        ::listen(listener.get(), 1);
+        ::listen(listener.get(), 8);
     }
+    const bool loopback = m_o.host.rfind("127.", 0) == 0;
     const std::string where = m_client_mode ? fmt::format("connecting to {}", m_o.client) : fmt::format("listening on {}:{}", m_o.host, m_o.port);
-    logger()->info("serve: model {} nodes, {} candidate skin nodes, {} surface and target nodes; ready in {:.1f} s, {} ({} frame)",
+    logger()->info("serve: model {} nodes, {} candidate skin nodes, {} surface and target nodes; ready in {:.1f} s, {} ({} frame, up to {} clients)",
                    m_subject.model.mesh.node_count(), m_condensed->precomputation().candidate_nodes, m_condensed->query_nodes().size(), m_ready_s, where,
-                   m_o.frame);
+                   m_o.frame, m_o.max_clients);
+    if (!m_client_mode && loopback)
+        logger()->info("serve: bound to the loopback address {}: only programs on this machine can connect (OpenIGTLink has no authentication)", m_o.host);
+    else if (!m_client_mode)
+        logger()->warn("serve: bound to {}: anyone who reaches this port can send poses and read the model (OpenIGTLink has no authentication or "
+                       "encryption)", m_o.host);
     std::cerr << fmt::format("serve: {}\n", where) << std::flush;
-    do {
-        Descriptor client(m_client_mode ? connect_to(m_o.client, "--client") : ::accept(listener.get(), nullptr, nullptr));
-        if (client.get() < 0) fail("serve: accept failed: {}", std::strerror(errno));
-        ::setsockopt(client.get(), IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
-        logger()->info(m_client_mode ? "serve: connected to the server" : "serve: a client connected");
-        serve_connection(client.get());
-        if (m_running.valid()) m_running.wait(); // a registration still running finishes before the next client
-        m_running = {};
-        m_waiting.reset();
-        logger()->info("serve: the {} disconnected after {} updates", m_client_mode ? "server" : "client", m_updates);
-    } while (!m_o.once && !m_client_mode); // a client session ends with its server's connection
+    if (m_client_mode) {
+        const int fd = connect_to(m_o.client, "--client");
+        m_clients.push_back(std::make_unique<ServeClient>(m_next_client++, fd));
+        logger()->info("serve: connected to the server");
+    }
+    bool had_client = m_client_mode;
+    while (true) {
+        if (const int signal = interrupt_signal(); signal != 0) {
+            // Stop accepting, finish what is in flight (the update in flight already finished: updates run on this thread), close cleanly.
+            logger()->info("serve: stopping on signal {} after {} updates; {} client(s) closed", signal, m_updates, m_clients.size());
+            if (m_running.valid()) m_running.wait();
+            for (auto& c : m_clients) flush(*c);
+            m_clients.clear();
+            throw_if_interrupted();
+        }
+        if (m_running.valid() && m_running.wait_for(std::chrono::seconds(0)) == std::future_status::ready) deliver_background();
+        std::vector<pollfd> fds;
+        if (!m_client_mode) fds.push_back({listener.get(), POLLIN, 0});
+        for (const auto& c : m_clients) fds.push_back({c->fd.get(), static_cast<short>(POLLIN | (c->outgoing.empty() ? 0 : POLLOUT)), 0});
+        if (::poll(fds.data(), fds.size(), m_running.valid() ? 20 : 100) < 0 && errno != EINTR) fail("serve: poll failed: {}", std::strerror(errno));
+        std::size_t at = 0;
+        if (!m_client_mode && (fds[at++].revents & POLLIN)) {
+            const int fd = ::accept(listener.get(), nullptr, nullptr);
+            if (fd >= 0) {
+                ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+                timeval stall{5, 0}; // a message started and not finished within 5 s ends that connection
+                ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &stall, sizeof stall);
+                auto c = std::make_unique<ServeClient>(m_next_client++, fd);
+                if (static_cast<int>(m_clients.size()) >= m_o.max_clients) {
+                    auto status = error_status_message("serve", fmt::format("too many clients: {} connected (--max-clients {})", m_clients.size(), m_o.max_clients));
+                    send_to(*c, status, 0);
+                    flush(*c);
+                    logger()->warn("serve: a client was refused: {} connected already (--max-clients {})", m_clients.size(), m_o.max_clients);
+                } else {
+                    logger()->info("serve: client {} connected ({} in all)", c->id, m_clients.size() + 1);
+                    m_clients.push_back(std::move(c));
+                    had_client = true;
+                }
+            }
+        }
+        std::optional<Pose> latest;
+        int dropped = 0;
+        const std::size_t polled = m_clients.size() < fds.size() - at ? m_clients.size() : fds.size() - at;
+        for (std::size_t i = 0; i < polled; ++i) {
+            ServeClient& c = *m_clients[i];
+            if (fds[at + i].revents & POLLOUT) flush(c);
+            if (!c.gone && (fds[at + i].revents & (POLLIN | POLLHUP | POLLERR))) read_from(c, latest, dropped);
+        }
+        if (latest) answer_pose(*latest, dropped);
+        for (auto& c : m_clients) flush(*c);
+        std::erase_if(m_clients, [&](const std::unique_ptr<ServeClient>& c) {
+            if (!c->gone) return false;
+            logger()->info("serve: client {} disconnected after {} updates ({} messages dropped for it)", c->id, m_updates, c->dropped_messages);
+            return true;
+        });
+        if ((m_o.once || m_client_mode) && had_client && m_clients.empty()) break; // a client session ends with its server's connection
+    }
+    if (m_running.valid()) m_running.wait(); // a registration still running finishes before the session ends
+    logger()->info("serve: session ended: {} updates, {} stale poses dropped, {} messages dropped for clients that did not read", m_updates,
+                   m_dropped_poses, m_dropped_messages);
 }
 
-void ServeSession::serve_connection(int fd)
+void ServeSession::read_from(ServeClient& c, std::optional<Pose>& latest, int& dropped)
 {
-    std::optional<IgtlMessage> pending; // read while dropping stale poses, not answered yet
-    while (true) {
-        if (m_running.valid() && m_running.wait_for(std::chrono::seconds(0)) == std::future_status::ready) deliver_background(fd);
-        if (!pending && !more_waiting(fd, m_running.valid() ? 50 : -1)) continue;
-        auto message = pending ? std::move(pending) : read_igtl_message(fd);
-        pending.reset();
-        if (!message) return;
+    do {
+        std::optional<IgtlMessage> message;
+        try {
+            message = read_igtl_message(c.fd.get());
+        } catch (const Error& e) {
+            // A malformed stream: said to that client, its connection closed; the others go on.
+            send_to(c, error_status_message("serve", e.what()), 0);
+            flush(c);
+            logger()->warn("serve: client {}: {}; its connection is closed", c.id, e.what());
+            c.gone = true;
+            return;
+        }
+        if (!message) {
+            c.gone = true;
+            return;
+        }
         record("in", message->type, message->device, message->timestamp, &message->raw);
         if (message->type == "TRANSFORM" && message->device == m_o.tool) {
-            answer_pose(fd, std::move(*message), pending);
-        } else if (message->type == "STRING" && message->device.rfind("CMD_", 0) == 0) {
-            answer_command(fd, *message);
-        } else if (message->type == "POLYDATA" && message->device == m_o.cloud) {
+            if (latest) ++dropped; // the latest pose wins: an older one waiting is dropped unanswered
+            latest = Pose{std::move(*message), c.id};
+            continue;
+        }
+        if (latest) { // answered in order: the pose that came first
+            answer_pose(*latest, dropped);
+            latest.reset();
+            dropped = 0;
+        }
+        handle(c, *message);
+    } while (!c.gone && more_waiting(c.fd.get()));
+}
+
+void ServeSession::handle(ServeClient& c, const IgtlMessage& message)
+{
+    try {
+        if (message.type == "STRING" && message.device.rfind("CMD_", 0) == 0) {
+            answer_command(c, message);
+        } else if (message.type == "GET_POLYDATA") {
+            // OpenIGTLink's query: the current surface of the organ it names (the liver for any other name).
+            const OrganSurface* surface = &m_surfaces.front();
+            for (const auto& o : m_surfaces)
+                if (o.name == message.device) surface = &o;
+            send_to(c, organ_surface_message(*surface, m_subject.model, m_condensed->query_field_mm(), m_wire), message.timestamp);
+        } else if (message.type == "POLYDATA" && message.device == m_o.cloud) {
             LabelledPointCloud cloud;
-            cloud.points = polydata_points(*message, m_wire);
+            cloud.points = polydata_points(message, m_wire);
             cloud.labels.assign(cloud.points.size(), 0);
-            queue({[this, cloud = std::move(cloud)] { return register_cloud(cloud); }, m_o.cloud, message->timestamp});
-        } else if (message->type == "IMAGE" && message->device == m_o.segmentation) {
-            std::optional<LabelVolume> labels;
-            try {
-                labels = igtl_image_labels(*message);
-            } catch (const Error& e) {
-                // An image that is no segmentation (a grey-level frame sent under its name): said on the wire, the session goes on.
-                send(fd, error_status_message(m_o.segmentation, e.what()), message->timestamp);
-                logger()->warn("serve: {}", e.what());
-            }
-            if (labels) queue({[this, labels = std::move(*labels)] { return register_segmentation(labels); }, m_o.segmentation, message->timestamp});
+            queue({[this, cloud = std::move(cloud)] { return register_cloud(cloud); }, m_o.cloud, message.timestamp, c.id});
+        } else if (message.type == "IMAGE" && message.device == m_o.segmentation) {
+            LabelVolume labels = igtl_image_labels(message);
+            queue({[this, labels = std::move(labels)] { return register_segmentation(labels); }, m_o.segmentation, message.timestamp, c.id});
         }
         // STATUS (Slicer sends one on connecting), other devices and unknown types: skipped.
+    } catch (const Error& e) {
+        // A well-formed message whose content is refused (a grey-level IMAGE, a cloud of NaN): said on
+        // the wire to its sender, and the session goes on.
+        send_to(c, error_status_message(message.device, e.what()), message.timestamp);
+        logger()->warn("serve: client {}: {}", c.id, e.what());
     }
 }
 
-void ServeSession::send(int fd, igtl::MessageBase* m, std::uint64_t timestamp)
+ServeClient* ServeSession::client(int id)
+{
+    for (auto& c : m_clients)
+        if (c->id == id && !c->gone) return c.get();
+    return nullptr;
+}
+
+void ServeSession::send_to(ServeClient& c, igtl::MessageBase* m, std::uint64_t timestamp)
 {
     stamp(m, timestamp);
-    send_message(fd, m);
+    m->Pack();
+    enqueue(c, static_cast<const std::uint8_t*>(m->GetPackPointer()), static_cast<std::size_t>(m->GetPackSize()), false);
     record("out", m->GetDeviceType(), m->GetDeviceName(), timestamp);
+}
+
+void ServeSession::broadcast(igtl::MessageBase* m, std::uint64_t timestamp)
+{
+    stamp(m, timestamp);
+    m->Pack();
+    for (auto& c : m_clients)
+        if (!c->gone) enqueue(*c, static_cast<const std::uint8_t*>(m->GetPackPointer()), static_cast<std::size_t>(m->GetPackSize()), true);
+    record("out", m->GetDeviceType(), m->GetDeviceName(), timestamp);
+}
+
+void ServeSession::enqueue(ServeClient& c, const std::uint8_t* bytes, std::size_t n, bool droppable)
+{
+    const auto limit = static_cast<std::size_t>(m_o.queue_mib * 1024.0 * 1024.0);
+    if (droppable && c.queued_bytes + n > limit && !c.outgoing.empty()) {
+        if (c.dropped_messages++ == 0) logger()->warn("serve: client {} does not read what it is sent: messages are dropped for it (--send-queue {} MiB)", c.id, m_o.queue_mib);
+        ++m_dropped_messages;
+        return;
+    }
+    c.outgoing.emplace_back(bytes, bytes + n);
+    c.queued_bytes += n;
+}
+
+void ServeSession::flush(ServeClient& c)
+{
+    while (!c.gone && !c.outgoing.empty()) {
+        const auto& front = c.outgoing.front();
+        const ssize_t sent = ::send(c.fd.get(), front.data() + c.front_sent, front.size() - c.front_sent, MSG_NOSIGNAL | MSG_DONTWAIT);
+        if (sent < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) return; // the socket is full: later
+        if (sent <= 0) {
+            c.gone = true;
+            return;
+        }
+        c.front_sent += static_cast<std::size_t>(sent);
+        if (c.front_sent == front.size()) {
+            c.queued_bytes -= front.size();
+            c.outgoing.pop_front();
+            c.front_sent = 0;
+        }
+    }
 }
 
 void ServeSession::record(const char* direction, const std::string& type, const std::string& device, std::uint64_t timestamp,
@@ -428,37 +590,62 @@ void ServeSession::record(const char* direction, const std::string& type, const 
     m_record.flush();
 }
 
-void ServeSession::answer_pose(int fd, IgtlMessage message, std::optional<IgtlMessage>& pending)
+void ServeSession::answer_pose(const Pose& pose, int dropped)
 {
-    // The latest pose wins: poses queued behind this one replace it unanswered.
-    int dropped = 0;
-    while (more_waiting(fd)) {
-        auto next = read_igtl_message(fd);
-        if (!next) break;
-        if (next->type != "TRANSFORM" || next->device != m_o.tool) {
-            pending = std::move(next); // answered after this pose, in order
-            break;
+    m_dropped_poses += static_cast<std::uint64_t>(dropped);
+    const IgtlMessage& message = pose.message;
+    ServeClient* sender = client(pose.client);
+    // A pose must be a rigid motion with finite numbers (Slicer sends float32: orthonormal to 1e-3).
+    std::string refused;
+    if (message.content.size() < 48) refused = fmt::format("TRANSFORM '{}' holds {} bytes, not 48", message.device, message.content.size());
+    Mat3 r = Mat3::Zero();
+    Vec3 position = Vec3::Zero();
+    if (refused.empty()) {
+        for (int k = 0; k < 12; ++k) {
+            const double v = read_float_be(message.content.data() + 4 * k);
+            if (!std::isfinite(v)) refused = fmt::format("TRANSFORM '{}': element {} is not finite", message.device, k + 1);
+            if (k < 9) r(k % 3, k / 3) = v; // columns first, as OpenIGTLink packs them
         }
-        record("in", next->type, next->device, next->timestamp, &next->raw);
-        message = std::move(*next);
-        ++dropped;
-    }
-    if (message.content.size() < 48) fail("OpenIGTLink: TRANSFORM '{}' holds {} bytes, not 48", message.device, message.content.size());
-    const Vec3 position(m_wire * read_float_be(message.content.data() + 36), m_wire * read_float_be(message.content.data() + 40),
+        position = Vec3(m_wire * read_float_be(message.content.data() + 36), m_wire * read_float_be(message.content.data() + 40),
                         read_float_be(message.content.data() + 44));
+        if (refused.empty() && ((r.transpose() * r - Mat3::Identity()).cwiseAbs().maxCoeff() > 1e-3 || r.determinant() < 0)) {
+            const std::string why =
+                fmt::format("TRANSFORM '{}' is not a rigid motion (its rotation part is not orthonormal and right-handed to 1e-3)", message.device);
+            if (m_tool_shape.shape != IndenterShape::sphere) {
+                refused = why;
+            } else if (sender && sender->warned_rotation++ == 0) {
+                // A sphere has no orientation: its centre is used, and the sender is told once.
+                send_to(*sender, error_status_message(message.device, why + "; the sphere's centre is used, its rotation ignored"), message.timestamp);
+                logger()->warn("serve: client {}: {}; the sphere's centre is used, its rotation ignored (said once)", pose.client, why);
+            }
+        }
+    }
+    if (!refused.empty()) {
+        if (sender) send_to(*sender, error_status_message(message.device, refused), message.timestamp);
+        logger()->warn("serve: client {}: {}; the pose is ignored", pose.client, refused);
+        return;
+    }
     const auto started = std::chrono::steady_clock::now();
     const LiverModel& model = m_subject.model;
-    const auto update = m_condensed->move_to(m_tool_shape, position);
+    CondensedContactModel::Update update;
+    try {
+        update = m_condensed->move_to(m_tool_shape, position);
+    } catch (const Error& e) {
+        // A pose the contact cannot solve (an LCP that does not converge): the model stays where it was.
+        if (sender) send_to(*sender, error_status_message(message.device, e.what()), message.timestamp);
+        logger()->warn("serve: pose at ({:.1f}, {:.1f}, {:.1f}) mm LPS not solved: {}", position[0], position[1], position[2], e.what());
+        return;
+    }
     const std::vector<double> u = m_condensed->query_field_mm();
-    for (const auto& surface : m_surfaces) send(fd, organ_surface_message(surface, model, u, m_wire), message.timestamp);
-    send(fd, points_message("targets", move_landmarks(model, u, m_subject.rest_landmarks), m_wire, true), message.timestamp);
+    for (const auto& surface : m_surfaces) broadcast(organ_surface_message(surface, model, u, m_wire), message.timestamp);
+    broadcast(points_message("targets", move_landmarks(model, u, m_subject.rest_landmarks), m_wire, true), message.timestamp);
     ++m_updates;
     logger()->debug("serve: update {} at ({:.1f}, {:.1f}, {:.1f}) mm LPS: {} nodes in contact, {:.2f} ms ({} stale poses dropped)", m_updates, position[0],
                     position[1], position[2], update.active_nodes,
                     std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count(), dropped);
 }
 
-void ServeSession::answer_command(int fd, const IgtlMessage& message)
+void ServeSession::answer_command(ServeClient& c, const IgtlMessage& message)
 {
     const std::string xml = message.content.size() > 4 ? std::string(message.content.begin() + 4, message.content.end()) : "";
     const std::string command = xml_attribute(xml, "Name");
@@ -467,20 +654,24 @@ void ServeSession::answer_command(int fd, const IgtlMessage& message)
         m_condensed->reset();
         answer = "<Command Status=\"SUCCESS\" Message=\"the model is at rest\"/>";
     } else if (command == "field") {
-        // The dense field of the current state, on request only (one solve with the factor for every node).
+        // The dense field of the current state, on request only (one solve with the factor for every
+        // node; a prepared model makes the factor at the first request: seconds, the updates wait).
         const LiverModel& model = m_subject.model;
-        send(fd, displacement_image_message(model.mesh, m_condensed->full_displacement_mm(), m_field_spacing, 2.0 * model.cell_size_mm.maxCoeff(), m_wire),
-             message.timestamp);
+        send_to(c, displacement_image_message(model.mesh, m_condensed->full_displacement_mm(), m_field_spacing, 2.0 * model.cell_size_mm.maxCoeff(), m_wire),
+                message.timestamp);
         answer = fmt::format("<Command Status=\"SUCCESS\" Message=\"IMAGE displacement sent ({} mm voxels)\"/>", m_field_spacing);
     } else if (command == "status") {
-        answer = fmt::format("<Command Status=\"SUCCESS\" Updates=\"{}\" Nodes=\"{}\" Frame=\"{}\"/>", m_updates, m_subject.model.mesh.node_count(), m_o.frame);
+        answer = fmt::format("<Command Status=\"SUCCESS\" Updates=\"{}\" Nodes=\"{}\" Frame=\"{}\" Clients=\"{}\" DroppedPoses=\"{}\" DroppedMessages=\"{}\" "
+                             "Factorised=\"{}\"/>",
+                             m_updates, m_subject.model.mesh.node_count(), m_o.frame, m_clients.size(), m_dropped_poses, m_dropped_messages,
+                             m_condensed->factorised() ? "yes" : "no");
     } else {
         answer = fmt::format("<Command Status=\"FAIL\" Message=\"unknown command '{}' (reset, status, field)\"/>", command);
     }
     auto ack = igtl::StringMessage::New();
     ack->SetDeviceName(("ACK_" + message.device.substr(4)).c_str());
     ack->SetString(answer.c_str());
-    send(fd, ack, message.timestamp);
+    send_to(c, ack, message.timestamp);
 }
 
 void ServeSession::queue(Job job)
@@ -493,16 +684,16 @@ void ServeSession::queue(Job job)
     m_running = std::async(std::launch::async, m_running_job.run);
 }
 
-void ServeSession::deliver_background(int fd)
+void ServeSession::deliver_background()
 {
-    // A registration is done: its answer goes out with its input's timestamp.
+    // A registration is done: its answer goes to every client with its input's timestamp.
     try {
         const BackgroundAnswer answer = m_running.get();
-        for (const auto& m : answer.messages) send(fd, m, m_running_job.timestamp);
+        for (const auto& m : answer.messages) broadcast(m, m_running_job.timestamp);
         logger()->info("serve: {}", answer.note);
     } catch (const Error& e) {
-        // An input the pipeline refuses is the client's bad input: said on the wire, the session goes on.
-        send(fd, error_status_message(m_running_job.device, e.what()), m_running_job.timestamp);
+        // An input the pipeline refuses is the client's bad input: said to it on the wire, the session goes on.
+        if (ServeClient* c = client(m_running_job.client)) send_to(*c, error_status_message(m_running_job.device, e.what()), m_running_job.timestamp);
         logger()->warn("serve: {} refused: {}", m_running_job.device, e.what());
     }
     if (m_waiting) {
@@ -569,7 +760,10 @@ void add_subcommand_serve(CLI::App& app)
     sub->add_option("--port", o->port, "TCP port to listen on (Slicer and PLUS default to 18944; give it only when asked)");
     sub->add_option("--client", o->client, "Client mode: connect to HOST:PORT (a PlusServer streaming the tracker's poses) instead of listening; "
                                            "the session ends when that server closes the connection");
-    sub->add_option("--host", o->host, "Address to listen on (default 127.0.0.1; 0.0.0.0 for every interface)");
+    sub->add_option("--bind,--host", o->host, "Address to listen on (default 127.0.0.1, this machine only; 0.0.0.0 for every interface: "
+                                              "OpenIGTLink has no authentication, see the README)");
+    sub->add_option("--max-clients", o->max_clients, "Connections served at once (default 4); more are refused with a STATUS");
+    sub->add_option("--send-queue", o->queue_mib, "Per client: MiB of answers waiting to be sent before new ones are dropped for it (default 64)");
     sub->add_option("--frame", o->frame, "Coordinates on the wire: ras (3D Slicer's, default) or lps (the images')");
     sub->add_option("--tool", o->tool, "Device name of the tool's TRANSFORM (default 'tool'); other transforms are ignored");
     sub->add_option("--record", o->record, "Write every message in and out (type, device, timestamp, wall time; the bytes of those in) as JSON "
@@ -586,6 +780,8 @@ void add_subcommand_serve(CLI::App& app)
         if (o->client.empty() == (o->port == 0)) fail("serve: give --port (listen) or --client HOST:PORT (connect to a PlusServer), not both");
         if (!o->client.empty() && o->client.rfind(':') == std::string::npos) fail("--client '{}': give HOST:PORT", o->client);
         if (o->client.empty() && (o->port < 1 || o->port > 65535)) fail("--port {} must lie in 1 … 65535", o->port);
+        if (o->max_clients < 1) fail("--max-clients {} must be ≥ 1", o->max_clients);
+        if (!(o->queue_mib > 0) || !std::isfinite(o->queue_mib)) fail("--send-queue {} must be > 0 MiB", o->queue_mib);
         if (o->frame != "ras" && o->frame != "lps") fail("--frame '{}': use ras or lps", o->frame);
         const CompressionRegistrationSettings s = settings->resolve();
         validate(s, SettingNaming::option);

@@ -158,17 +158,113 @@ def test_stale_poses_are_dropped_and_the_latest_is_answered(server, dataset):
     assert answered == sorted(answered)
 
 
-def test_a_corrupt_message_stops_the_server_with_a_clear_error(dataset, program):
+def read_until_targets(sock, timestamp=None):
+    """Reads answers until the POINT targets (checking their timestamp when given)."""
+    while True:
+        kind, device, stamp, body = read_message(sock)
+        if timestamp is not None and kind in ("POLYDATA", "POINT"):
+            assert stamp == timestamp, (kind, device, stamp, timestamp)
+        if kind == "POINT":
+            return targets_from(body)
+
+
+def test_bad_clients_get_a_status_and_the_others_go_on(dataset, program):
+    """Several clients at once (issue 44, bad input): a corrupt stream gets a STATUS and its
+    connection closed, a pose that is no rigid motion or holds NaN gets a STATUS and the
+    connection stays, a client that never reads does not hold up the others (its answers are
+    dropped past --send-queue), a client beyond --max-clients is refused; a well-behaved client is
+    answered throughout, and the server ends cleanly when the last client leaves (--once)."""
     if not program:
         skip_or_fail("the physreg program is needed to run the server")
+    p, port = start_server(dataset, program, "--max-clients", "3", "--send-queue", "0.05")
+    lps = final_pose_lps(dataset, "A")
+    pose = (-lps[0], -lps[1], lps[2])
+    good = socket.create_connection(("127.0.0.1", port), timeout=60)
+    silent = socket.create_connection(("127.0.0.1", port), timeout=60)  # connects, never reads
+    silent.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    bad = socket.create_connection(("127.0.0.1", port), timeout=60)
+    good.sendall(command("CMD_1", '<Command Name="status" />', 1))
+    assert read_message(good)[:2] == ("STRING", "ACK_1")  # the three are connected
+    extra = socket.create_connection(("127.0.0.1", port), timeout=60)
+    kind, device, stamp, body = read_message(extra)
+    assert kind == "STATUS" and b"too many clients" in body and b"--max-clients 3" in body, body
+    extra.close()
+    # A rotation that is not one: a STATUS (once), the sphere's centre used; a NaN translation: a
+    # STATUS, the pose ignored; the connection stays.
+    sheared = message("TRANSFORM", "tool", struct.pack(">12f", 1, 0, 0, 0.5, 1, 0, 0, 0, 1, *pose), 2)
+    bad.sendall(sheared)
+    kind, device, stamp, body = read_message(bad)
+    assert kind == "STATUS" and b"not a rigid motion" in body and b"rotation ignored" in body, body
+    read_until_targets(bad, 2)  # answered with the sphere's centre
+    read_until_targets(good, 2)  # every client gets the model's update
+    bad.sendall(transform((float("nan"), 0.0, 0.0), timestamp=3))
+    kind, device, stamp, body = read_message(bad)
+    assert kind == "STATUS" and b"not finite" in body, body
+    # The well-behaved client streams poses while the silent one never reads.
+    for k in range(40):
+        good.sendall(transform(pose, timestamp=100 + k))
+        read_until_targets(good, 100 + k)
+    # A corrupt stream (one flipped byte: the CRC no longer matches): a STATUS, then closed.
+    corrupt = bytearray(transform(pose, timestamp=5))
+    corrupt[-1] ^= 0x55
+    bad.sendall(bytes(corrupt))
+    kind = None
+    while kind != "STATUS":  # the model updates that the good client's poses gave come first
+        kind, device, stamp, body = read_message(bad)
+    assert b"CRC mismatch" in body, body
+    bad.settimeout(30)
+    while True:  # then nothing more: the server closed that connection
+        chunk = bad.recv(65536)
+        if not chunk:
+            break
+    bad.close()
+    good.sendall(transform(pose, timestamp=999))
+    read_until_targets(good, 999)  # still answered
+    # More poses until the silent client's socket buffers and its 0.05 MiB queue are full: then its
+    # answers are dropped, while the good client is still answered at once.
+    dropped = 0
+    for k in range(40):
+        for j in range(50):
+            good.sendall(transform(pose, timestamp=1000 + 50 * k + j))
+            read_until_targets(good, 1000 + 50 * k + j)
+        good.sendall(command("CMD_2", '<Command Name="status" />', 4))
+        kind, device, stamp, body = read_message(good)
+        assert (kind, device) == ("STRING", "ACK_2"), (kind, device)
+        dropped = int(body.split(b'DroppedMessages="')[1].split(b'"')[0])
+        if dropped > 0:
+            break
+    assert dropped > 0, body  # the silent client's answers past its queue
+    good.close()
+    silent.close()
+    p.wait(timeout=60)
+    log = p.stderr.read()
+    assert p.returncode == 0, log
+
+
+def test_sigterm_closes_the_server_cleanly(dataset, program):
+    if not program:
+        skip_or_fail("the physreg program is needed to run the server")
+    import signal
     p, port = start_server(dataset, program)
-    bad = bytearray(transform((0.0, 0.0, 0.0), timestamp=5))
-    bad[-1] ^= 0x55  # one flipped byte in the body: the CRC no longer matches
     with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
-        sock.sendall(bytes(bad))
+        lps = final_pose_lps(dataset, "A")
+        sock.sendall(transform((-lps[0], -lps[1], lps[2]), timestamp=8))
+        read_until_targets(sock, 8)
+        p.send_signal(signal.SIGTERM)
         p.wait(timeout=60)
-    assert p.returncode == 1
-    assert "TRANSFORM message 'tool': CRC mismatch" in p.stderr.read()
+        assert sock.recv(1) == b""  # closed
+    assert p.returncode == 143, (p.returncode, p.stderr.read())
+
+
+def test_a_port_in_use_is_named(dataset, program):
+    if not program:
+        skip_or_fail("the physreg program is needed")
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        r = subprocess.run([program, "serve", "--dataset", str(dataset), "--grid", GRID, "--port", str(port)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 1 and f"--port {port}: cannot listen on 127.0.0.1:{port}" in r.stderr, r.stderr
 
 
 def test_client_mode_connects_to_a_tracker_server_and_follows_its_poses(dataset, program):
@@ -492,3 +588,57 @@ def test_a_prepared_model_serves_as_the_dataset_does_and_bad_models_are_refused(
                         "-o", str(tmp_path / "m2")], capture_output=True, text=True)
     assert r.returncode == 1 and "each point is x,y,z" in r.stderr, r.stderr
     assert not (tmp_path / "m2").exists()
+
+
+EXAMPLES = "/usr/share/doc/openigtlink-examples/examples"
+
+
+@pytest.fixture(scope="module")
+def igtl_examples(tmp_path_factory):
+    """OpenIGTLink's own example programs (Debian's openigtlink-examples: sources), each built here
+    against the installed library in about a second."""
+    if not os.path.isdir(EXAMPLES) or not os.path.exists("/usr/include/openigtlink/igtlOSUtil.h"):
+        skip_or_fail("Debian's openigtlink-examples and libopenigtlink-dev are needed")
+    out = tmp_path_factory.mktemp("igtl_examples")
+    built = {}
+    for folder, name in (("Tracker", "TrackerClient"), ("Receiver", "ReceiveClient"), ("PolyData", "PolyDataClient")):
+        exe = out / name
+        r = subprocess.run(["g++", "-O1", f"{EXAMPLES}/{folder}/{name}.cxx", "-I/usr/include/openigtlink", "-lOpenIGTLink", "-o", str(exe)],
+                           capture_output=True, text=True)
+        if r.returncode != 0:
+            skip_or_fail(f"{name} does not build here: {r.stderr[-400:]}")
+        built[name] = str(exe)
+    return built
+
+
+def test_openigtlink_example_clients_are_served(dataset, program, igtl_examples):
+    """Clients we did not write: ReceiveClient listens to every model update (it decodes the POINT
+    targets, skips the POLYDATA by their body size), TrackerClient streams poses named 'Tracker' on a
+    circle at 20 Hz and never reads (the circle leaves the candidate region: the nodes it reaches are
+    added), PolyDataClient asks GET_POLYDATA ten times and expects a POLYDATA each
+    time. All at once on one server."""
+    if not program:
+        skip_or_fail("the physreg program is needed to run the server")
+    p, port = start_server(dataset, program, "--tool", "Tracker")
+    receiver = subprocess.Popen([igtl_examples["ReceiveClient"], "127.0.0.1", str(port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(1.0)
+    tracker = subprocess.run(["timeout", "6", igtl_examples["TrackerClient"], "127.0.0.1", str(port), "20"], capture_output=True, text=True)
+    assert tracker.returncode == 124, tracker.stderr  # streamed until stopped (it never ends by itself)
+    polydata = subprocess.run(["timeout", "60", igtl_examples["PolyDataClient"], "127.0.0.1", str(port)], capture_output=True, text=True)
+    assert polydata.returncode == 0, polydata.stderr[-2000:]
+    assert polydata.stderr.count("Receiving POLYDATA data type.") == 10 and "Invalid response" not in polydata.stderr, polydata.stderr[-2000:]
+    with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
+        sock.sendall(command("CMD_9", '<Command Name="status" />', 9))
+        kind, device, stamp, body = read_message(sock)
+        assert (kind, device) == ("STRING", "ACK_9"), (kind, device)
+        updates = int(body.split(b'Updates="')[1].split(b'"')[0])
+        receiver.terminate()
+        out, err = receiver.communicate(timeout=30)
+    p.wait(timeout=60)
+    log = p.stderr.read()
+    assert p.returncode == 0, log
+    assert updates >= 20, (updates, log)  # about 120 poses sent; stale ones dropped
+    names, _, _ = physreg.read_landmarks(dataset / "rest" / "landmarks.csv")
+    assert err.count("Receiving POINT data type.") >= 10, err[-2000:]
+    assert f" Name      : {names[0]}" in err, err[-2000:]
+    assert "not a rigid motion" not in log and "not finite" not in log, log  # its poses are rigid and finite

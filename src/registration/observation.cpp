@@ -5,6 +5,7 @@
 #include "physreg/mesh/coarsen.hpp"
 #include "physreg/mesh/point_location.hpp"
 #include "physreg/mesh/triangle_search.hpp"
+#include "physreg/registration/compression/compression_registration.hpp"
 
 #include <chrono>
 
@@ -48,7 +49,13 @@ ModelRegistration register_model(const Model& model, const Observation& observat
             out.displacement_mm.assign(3 * model.mesh.node_count(), 0.0);
         } else {
             if (tool->tool.path.size() == 1) out.notes = "one pose: the tool came in along the skin's normal from where it first touched it";
-            out.displacement_mm = predict_compression(prepared, path, {}, settings.compression, "the tool observation").displacement_mm;
+            std::string fallback;
+            out.displacement_mm =
+                predict_compression_with_fallback(prepared, path, {}, settings.compression, "the tool observation", 20, {}, &fallback).displacement_mm;
+            if (!fallback.empty()) {
+                out.solver = "the model linearised at rest, condensed contact (fallback)";
+                out.notes += (out.notes.empty() ? "" : "; ") + fallback;
+            }
         }
     } else if (const auto* cloud = std::get_if<CloudObservation>(&observation)) {
         out.mode = "surface";

@@ -4,6 +4,7 @@
 #include "physreg/registration/compression/compression_registration.hpp"
 
 #include "physreg/core/error.hpp"
+#include "physreg/core/interrupt.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/landmarks_io.hpp"
@@ -306,6 +307,29 @@ CompressionSubject read_dataset_compression_subject(const std::filesystem::path&
 
 // ---- 2. a compression predicted ------------------------------------------------------------------
 
+CompressionPrediction predict_compression_with_fallback(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks,
+                                                        const PredictionOptions& options, const std::string& what, int tool_updates,
+                                                        const CondensedContactOptions& condensed, std::string* fallback,
+                                                        CondensedPrecomputation* precomputation, double* ms_per_update)
+{
+    try {
+        return predict_compression(model, tool, rest_landmarks, options, what);
+    } catch (const Interrupted&) {
+        throw;
+    } catch (const Error& e) {
+        // A hard case is not bad input (issue 46 item 2): when the Neo-Hookean model folds an element
+        // under the tool even at the slowest ramp, the model linearised at rest with the contact
+        // condensed (which cannot fold) answers instead, and the caller says so.
+        if (std::string(e.what()).find("inverted") == std::string::npos) throw;
+        logger()->warn("{}: the nonlinear model could not keep the elements under the tool from folding ({}); answering with the model "
+                       "linearised at rest and condensed contact instead, less accurate for deep pushes",
+                       what, e.what());
+        CompressionPrediction out = predict_compression_condensed(model, tool, rest_landmarks, tool_updates, what, condensed, precomputation, ms_per_update);
+        if (fallback) *fallback = fmt::format("an element folded under the tool ({}); the answer is the linearised model's (condensed contact)", e.what());
+        return out;
+    }
+}
+
 CompressionRegistrationResult register_compression(const CompressionSubject& subject, const CompressionCase& observed,
                                                    const CompressionRegistrationSettings& settings, const std::function<void(double, const std::string&)>& progress)
 {
@@ -331,7 +355,11 @@ CompressionRegistrationResult register_compression(const CompressionSubject& sub
         r.prediction = predict_compression_condensed(model, observed.tool, subject.rest_landmarks, settings.tool_updates, what, options,
                                                      &r.condensed, &r.condensed_ms_per_update);
     } else {
-        r.prediction = predict_compression(model, observed.tool, subject.rest_landmarks, settings.prediction_options(), what);
+        CondensedContactOptions options;
+        options.memory_limit_bytes = settings.memory_limit_bytes();
+        r.prediction = predict_compression_with_fallback(model, observed.tool, subject.rest_landmarks, settings.prediction_options(), what, settings.tool_updates,
+                                                         options, &r.fallback, &r.condensed, &r.condensed_ms_per_update);
+        if (!r.fallback.empty()) r.fallback = fmt::format("the {} solver: {}", settings.solver, r.fallback);
     }
     // A tool that never reaches the model leaves it at rest: say so instead of a silent zero.
     r.contact = r.prediction.max_displacement_mm > 1e-6;
@@ -369,7 +397,12 @@ CompressionRegistrationResult register_compression(const CompressionSubject& sub
         s["tre_landmarks_at_rest"] = json::parse(tre_stats_json(*r.at_rest)); // the baseline: doing nothing
         s["tre_per_landmark"] = json::parse(tre_report_json(*r.tre))["landmarks"];
     }
-    if (condensed)
+    if (!r.fallback.empty()) {
+        s["fallback"] = r.fallback;
+        s["method"] = "condensed (fallback)";
+        s["notes"] = json::array({r.fallback});
+    }
+    if (condensed || !r.fallback.empty())
         s["condensed"] = {{"law", "the model's Neo-Hookean tangent at rest (linear)"}, {"tool_updates", r.prediction.iterations},
                           {"ms_per_update", r.condensed_ms_per_update}, {"candidate_nodes", r.condensed.candidate_nodes},
                           {"precomputation_s", r.condensed.assembly_s + r.condensed.factorisation_s + r.condensed.compliance_s},

@@ -125,12 +125,22 @@ CompressionSubject make_compression_subject(LabelVolume labels, const LabelRoles
 CompressionSubject read_dataset_compression_subject(const std::filesystem::path& dataset, const CompressionSettings& settings,
                                                     const std::string& parameters_file = "");
 
+/// predict_compression, and where the Neo-Hookean model folds an element under the tool even at its
+/// slowest ramp, the model linearised at rest with condensed contact (`tool_updates` positions)
+/// instead: `fallback` then says why (else it is left empty). Other errors (bad input, a tool that
+/// passes through the skin) are thrown as they are.
+CompressionPrediction predict_compression_with_fallback(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks,
+                                                        const PredictionOptions& options, const std::string& what, int tool_updates,
+                                                        const CondensedContactOptions& condensed, std::string* fallback,
+                                                        CondensedPrecomputation* precomputation = nullptr, double* ms_per_update = nullptr);
+
 struct CompressionRegistrationResult {
     CompressionRegistrationSettings settings;
     std::string state;
     CompressionPrediction prediction;
     bool contact = false;                     ///< the tool moved the model at all
-    CondensedPrecomputation condensed;        ///< solver condensed only
+    CondensedPrecomputation condensed;        ///< solver condensed only (or its fallback)
+    std::string fallback;                     ///< why the nonlinear solver's answer was replaced by the condensed one ("" : it was not)
     double condensed_ms_per_update = 0.0;
     std::optional<TreReport> tre, at_rest;    ///< when the case has a truth
     SampledField field;                       ///< on a grid over the mesh, settings.field_spacing
