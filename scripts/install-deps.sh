@@ -20,6 +20,7 @@ packages=(
   libnlopt-cxx-dev         # BOBYQA / Nelder–Mead: parameter estimation
   libfftw3-dev             # linked by ITK's registration modules (Demons, B-spline baselines)
   libopenigtlink-dev       # OpenIGTLink 1.11 (BSD): physreg serve's messages to trackers and 3D Slicer
+  openigtlink-examples     # tests: OpenIGTLink's own example clients (sources) that physreg serve is tested with
   liblbfgs-dev             # L-BFGS (Nocedal; MIT): paper 002's moduli and boundary-force estimation
   libopenmpi-dev openmpi-bin # enrichment database builds across processes (mpirun)
   zlib1g-dev               # compressed VTU arrays
