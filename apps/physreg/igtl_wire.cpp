@@ -61,7 +61,8 @@ std::uint64_t parse_header(const std::uint8_t* h, IgtlMessage& m)
     m.timestamp = read_be(h + 34, 8);
     const std::uint64_t body_size = read_be(h + 42, 8);
     if (m.version < 1 || m.version > 2) fail("OpenIGTLink: header version {} (read: 1 and 2)", m.version);
-    if (body_size > (std::uint64_t(1) << 31)) fail("OpenIGTLink: {} message '{}' announces {} bytes", m.type, m.device, body_size);
+    if (body_size > (std::uint64_t(256) << 20))
+        fail("OpenIGTLink: {} message '{}' announces a body of {} bytes, over the 256 MiB limit", m.type, m.device, body_size);
     return body_size;
 }
 

@@ -218,6 +218,12 @@ def test_bad_clients_get_a_status_and_the_others_go_on(dataset, program):
         if not chunk:
             break
     bad.close()
+    # A header announcing a body over the 256 MiB limit: a STATUS, then closed.
+    huge = socket.create_connection(("127.0.0.1", port), timeout=60)
+    huge.sendall(struct.pack(">H12s20sQQQ", 1, b"TRANSFORM", b"tool", 6, 300 << 20, 0))
+    kind, device, stamp, body = read_message(huge)
+    assert kind == "STATUS" and b"over the 256 MiB limit" in body, body
+    huge.close()
     good.sendall(transform(pose, timestamp=999))
     read_until_targets(good, 999)  # still answered
     # More poses until the silent client's socket buffers and its 0.05 MiB queue are full: then its
