@@ -648,3 +648,20 @@ def test_openigtlink_example_clients_are_served(dataset, program, igtl_examples)
     assert err.count("Receiving POINT data type.") >= 10, err[-2000:]
     assert f" Name      : {names[0]}" in err, err[-2000:]
     assert "not a rigid motion" not in log and "not finite" not in log, log  # its poses are rigid and finite
+
+
+def test_the_shipped_recording_of_the_demo_tool_paths_replays(dataset, program):
+    """examples/recordings/: the cirs057a seed 1 dataset's five tool paths (the demo's dataset), as
+    serve --record wrote them, replayed to a server; every pose answered. (Served here by the small
+    preset, the same anatomy at 4 mm voxels: the deeper paths leave its candidate region and the
+    nodes they reach are added.)"""
+    if not program:
+        skip_or_fail("the physreg program is needed")
+    recording = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "recordings", "cirs057a_seed1_tool_paths.jsonl")
+    p, port = start_server(dataset, program)
+    r = subprocess.run([program, "-q", "replay", recording, "--to", f"127.0.0.1:{port}", "--speed", "4", "--json"], capture_output=True, text=True,
+                       timeout=600)
+    p.wait(timeout=120)
+    assert r.returncode == 0 and p.returncode == 0, (r.stderr, p.stderr.read())
+    summary = json.loads(r.stdout)
+    assert summary["poses_sent"] == 105 and summary["last_pose_answered"], summary
