@@ -318,14 +318,17 @@ CompressionPrediction predict_compression_with_fallback(const LiverModel& model,
         throw;
     } catch (const Error& e) {
         // A hard case is not bad input (issue 46 item 2): when the Neo-Hookean model folds an element
-        // under the tool even at the slowest ramp, the model linearised at rest with the contact
-        // condensed (which cannot fold) answers instead, and the caller says so.
-        if (std::string(e.what()).find("inverted") == std::string::npos) throw;
-        logger()->warn("{}: the nonlinear model could not keep the elements under the tool from folding ({}); answering with the model "
-                       "linearised at rest and condensed contact instead, less accurate for deep pushes",
-                       what, e.what());
+        // under the tool even at the slowest ramp, or its solve stalls, the model linearised at rest
+        // with the contact condensed (which cannot fold) answers instead, and the caller says so.
+        const std::string message = e.what();
+        const bool folded = message.find("inverted") != std::string::npos, stalled = message.find("no equilibrium") != std::string::npos;
+        if (!folded && !stalled) throw;
+        const std::string why = folded ? "an element folded under the tool" : "the solve stalled short of equilibrium";
+        logger()->warn("{}: the nonlinear model failed: {} ({}); answering with the model linearised at rest and condensed contact instead, "
+                       "less accurate for deep pushes",
+                       what, why, message);
         CompressionPrediction out = predict_compression_condensed(model, tool, rest_landmarks, tool_updates, what, condensed, precomputation, ms_per_update);
-        if (fallback) *fallback = fmt::format("an element folded under the tool ({}); the answer is the linearised model's (condensed contact)", e.what());
+        if (fallback) *fallback = fmt::format("{} ({}); the answer is the linearised model's (condensed contact)", why, message);
         return out;
     }
 }

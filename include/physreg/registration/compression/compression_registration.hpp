@@ -126,7 +126,7 @@ CompressionSubject read_dataset_compression_subject(const std::filesystem::path&
                                                     const std::string& parameters_file = "");
 
 /// predict_compression, and where the Neo-Hookean model folds an element under the tool even at its
-/// slowest ramp, the model linearised at rest with condensed contact (`tool_updates` positions)
+/// slowest ramp or its solve stalls short of equilibrium, the model linearised at rest with condensed contact (`tool_updates` positions)
 /// instead: `fallback` then says why (else it is left empty). Other errors (bad input, a tool that
 /// passes through the skin) are thrown as they are.
 CompressionPrediction predict_compression_with_fallback(const LiverModel& model, const Indenter& tool, const LandmarkSet& rest_landmarks,
