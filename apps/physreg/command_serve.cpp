@@ -220,12 +220,13 @@ igtl::ImageMessage::Pointer displacement_image_message(const VolumeMesh& mesh, c
     }
     m->SetMatrix(matrix);
     m->AllocateScalars();
-    auto* out = static_cast<float*>(m->GetScalarPointer());
+    // The scalars follow a 72-byte header in the message's buffer: not 4-byte aligned, so copied
+    // byte-wise (a float store there is undefined behaviour; UBSan stops on it).
+    auto* out = static_cast<unsigned char*>(m->GetScalarPointer());
     const auto& c = f.field.components;
     for (std::size_t v = 0; v < c.size() / 3; ++v) {
-        out[3 * v] = static_cast<float>(wire * c[3 * v]);
-        out[3 * v + 1] = static_cast<float>(wire * c[3 * v + 1]);
-        out[3 * v + 2] = c[3 * v + 2];
+        const float xyz[3] = {static_cast<float>(wire * c[3 * v]), static_cast<float>(wire * c[3 * v + 1]), static_cast<float>(c[3 * v + 2])};
+        std::memcpy(out + 12 * v, xyz, sizeof xyz);
     }
     return m;
 }
