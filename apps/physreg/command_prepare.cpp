@@ -12,7 +12,7 @@
 #include "physreg/io/dataset.hpp"
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/landmarks_io.hpp"
-#include "physreg/registration/compression/prepared_model.hpp"
+#include "physreg/registration/prepared_model.hpp"
 
 #include <chrono>
 #include <iostream>

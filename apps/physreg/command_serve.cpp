@@ -24,7 +24,7 @@
 #include "physreg/io/dataset.hpp"
 #include "physreg/mesh/faces.hpp"
 #include "physreg/registration/compression/compression_registration.hpp"
-#include "physreg/registration/compression/prepared_model.hpp"
+#include "physreg/registration/prepared_model.hpp"
 #include "physreg/registration/surface/partial_surface_registration.hpp"
 #include "physreg/registration/surface/surface_model.hpp"
 

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
-#include "physreg/registration/compression/prepared_model.hpp"
+#include "physreg/registration/prepared_model.hpp"
 
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
