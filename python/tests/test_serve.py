@@ -488,11 +488,7 @@ def test_the_displacement_field_is_sent_on_request(dataset, program):
     lps = final_pose_lps(dataset, "A")
     with socket.create_connection(("127.0.0.1", port), timeout=120) as sock:
         sock.sendall(transform((-lps[0], -lps[1], lps[2]), timestamp=5))
-        while True:
-            kind, device, stamp, body = read_message(sock)
-            if kind == "POINT":
-                served = targets_from(body)
-                break
+        served = read_until_targets(sock)
         sock.sendall(command("CMD_7", '<Command Name="field" />', 6))
         kind, device, stamp, body = read_message(sock)
         assert (kind, device, stamp) == ("IMAGE", "displacement", 6), (kind, device)
@@ -556,11 +552,7 @@ def test_a_prepared_model_serves_as_the_dataset_does_and_bad_models_are_refused(
     lps = final_pose_lps(dataset, "A")
     with socket.create_connection(("127.0.0.1", port), timeout=120) as sock:
         sock.sendall(transform((-lps[0], -lps[1], lps[2]), timestamp=11))
-        while True:
-            kind, device, stamp, body = read_message(sock)
-            if kind == "POINT":
-                served = targets_from(body)
-                break
+        served = read_until_targets(sock)
         sock.sendall(command("CMD_2", '<Command Name="field" />', 12))
         kind, device, stamp, body = read_message(sock)
         assert (kind, device, stamp) == ("IMAGE", "displacement", 12), (kind, device)
