@@ -91,9 +91,7 @@ void add_subcommand_prepare(CLI::App& app)
         bar.update(0.02, "the body model");
         if (!o->dataset.empty()) {
             subject = read_dataset_compression_subject(o->dataset, s, o->parameters);
-            for (const auto& st : read_phantom_dataset(o->dataset).states)
-                if (st.tool && st.kind == "compression") tools.push_back(*st.tool);
-            if (tools.empty()) fail("prepare: dataset '{}' has no tool compression (the tool's shape and the session's paths)", o->dataset);
+            tools = dataset_session_tools(o->dataset);
             subject.description = {{"dataset", fs::absolute(o->dataset).string()}};
         } else {
             if (o->tool_paths.empty()) fail("prepare: --labels needs at least one --tool-path (the contact candidates lie near the tool's paths)");

@@ -349,11 +349,7 @@ std::unique_ptr<PreparedBodyModel> served_model(const ServeOptions& o, const Com
                  o.parameters.empty() ? fmt::format("{}", fmt::join(set, ", ")) : std::string("--parameters"));
         return read_prepared_model(o.model, condensed_options);
     }
-    const PhantomDataset dataset = read_phantom_dataset(o.dataset);
-    std::vector<Indenter> session_tools;
-    for (const auto& st : dataset.states)
-        if (st.tool && st.kind == "compression") session_tools.push_back(*st.tool);
-    if (session_tools.empty()) fail("serve: dataset '{}' has no tool compression (the tool's shape and the session's paths)", o.dataset);
+    std::vector<Indenter> session_tools = dataset_session_tools(o.dataset);
     PreparedModelOptions options;
     options.condensed = condensed_options;
     options.surface_cell_size_mm = 0.0; // meshed at the first cloud

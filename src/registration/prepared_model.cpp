@@ -5,6 +5,7 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/core/version.hpp"
+#include "physreg/io/dataset.hpp"
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/landmarks_io.hpp"
 #include "physreg/io/vtu.hpp"
@@ -157,6 +158,15 @@ std::unique_ptr<PreparedBodyModel> prepare_body_model(CompressionSubject subject
     out->description["surface_cell_size_mm"] = options.surface_cell_size_mm;
     out->description["surface_seed"] = options.surface_seed;
     return out;
+}
+
+std::vector<Indenter> dataset_session_tools(const std::filesystem::path& directory)
+{
+    std::vector<Indenter> tools;
+    for (const auto& st : read_phantom_dataset(directory).states)
+        if (st.tool && st.kind == "compression") tools.push_back(*st.tool);
+    if (tools.empty()) fail("dataset '{}' has no tool compression (the tool's shape and the session's paths)", directory.string());
+    return tools;
 }
 
 bool is_prepared_model(const std::filesystem::path& directory)

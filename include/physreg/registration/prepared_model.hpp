@@ -65,6 +65,10 @@ void write_prepared_model(const PreparedBodyModel& model, const std::filesystem:
 /// corrupt part, another format version, or a model that no longer matches its stored compliance.
 std::unique_ptr<PreparedBodyModel> read_prepared_model(const std::filesystem::path& directory, const CondensedContactOptions& options = {});
 
+/// A phantom dataset's tool compressions (the tool's shape and the session's paths); throws Error
+/// naming `directory` when it has none.
+std::vector<Indenter> dataset_session_tools(const std::filesystem::path& directory);
+
 /// Whether `directory` holds a prepared model (its prepared.json).
 bool is_prepared_model(const std::filesystem::path& directory);
 
