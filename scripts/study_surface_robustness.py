@@ -223,7 +223,8 @@ while not args.report_only and len(cases) < args.cases and attempts < 4 * args.c
             "biomechanical_mm": m["biomechanical"]["tre"]["all"]["mean_mm"], "rigid_mm": m["rigid"]["tre"]["all"]["mean_mm"],
             "flags": s["safeguard"]["flags"], "notes": s["notes"], "support_chosen": s["support"],
             "hypotheses": {h["name"]: {"fit_mm": h["cloud_to_model_mm"]["mean"], "tre_mm": h["tre"]["all"]["mean_mm"]} for h in s["support_hypotheses"]["hypotheses"]},
-            "seconds": s["seconds"], "tetrahedra": s["model"]["tetrahedra"]})
+            "seconds": s["seconds"], "tetrahedra": s["model"]["tetrahedra"],
+            "uncertainty": {k: s.get("uncertainty", {}).get(k) for k in ("run", "spread_mm", "motion_mm", "resolved", "targets_precision_mean_mm", "seconds")}})
     else:
         entry["error"] = open(out + ".log").read()[-600:]
     cases.append(entry)
@@ -250,8 +251,41 @@ summary = {
     "dense_patch_max_mm": max([c["answer_mm"] for c in dense], default=float("nan")),
     "median_seconds": median([c["seconds"] for c in ok]),
 }
+# The cloud-halves rule (issue 46 item 5) was chosen on the first 33 draws (c00-c32): the later draws
+# are the ones it was not built on.
+later = [c for c in ok if int(c["name"][1:]) >= 33]
+later_worse = [c for c in later if c["answer_mm"] > c["at_rest_mm"]]
+summary.update({"later_draws": len(later), "later_worse_than_at_rest": len(later_worse),
+                "later_worse_unflagged": len([c for c in later_worse if not c["flags"]]),
+                "later_median_ratio": median([c["answer_mm"] / c["at_rest_mm"] for c in later])})
+
+
+def spearman(a, b):
+    ra, rb = (np.argsort(np.argsort(v)) for v in (a, b))
+    return float(np.corrcoef(ra, rb)[0, 1]) if len(a) > 2 else float("nan")
+
+
+# The halves' precision at the targets, as a predicted TRE: how it ranks the true TRE of the answer
+# (and of the biomechanical result), and whether it flags the cases worse than at rest.
+with_halves = [c for c in ok if (c.get("uncertainty") or {}).get("targets_precision_mean_mm") is not None]
+if with_halves:
+    summary["spearman_precision_vs_biomechanical_tre"] = spearman([c["uncertainty"]["targets_precision_mean_mm"] for c in with_halves],
+                                                                  [c["biomechanical_mm"] for c in with_halves])
+    summary["spearman_spread_over_motion_vs_ratio"] = spearman([c["uncertainty"]["spread_mm"] / max(1e-9, c["uncertainty"]["motion_mm"]) for c in with_halves],
+                                                               [c["biomechanical_mm"] / c["at_rest_mm"] for c in with_halves])
+    bio_worse = [c for c in with_halves if c["biomechanical_mm"] > c["at_rest_mm"]]
+    summary["biomechanical_worse_than_at_rest"] = len(bio_worse)
+    summary["of_those_unresolved_by_halves"] = len([c for c in bio_worse if c["uncertainty"]["resolved"] is False])
+    summary["unresolved_by_halves_not_worse"] = len([c for c in with_halves if c["uncertainty"]["resolved"] is False and c["biomechanical_mm"] <= c["at_rest_mm"]])
 print(json.dumps(summary, indent=1))
 json.dump({"seed": args.seed, "summary": summary, "cases": cases}, open(os.path.join(args.work, "study.json"), "w"), indent=1)
+
+def halves_cell(c):
+    u = c.get("uncertainty") or {}
+    if not u.get("run"):
+        return "–"
+    return f"{u['spread_mm']:.2f} / {u['motion_mm']:.2f}{'' if u['resolved'] else ' (unresolved)'}"
+
 
 if not args.no_docs:
     import matplotlib
@@ -279,14 +313,16 @@ if not args.no_docs:
     os.makedirs(os.path.join(ROOT, "docs", "results"), exist_ok=True)
     json.dump({"seed": args.seed, "summary": summary, "cases": cases}, open(os.path.join(ROOT, "docs", "results", "surface_robustness.json"), "w"), indent=1)
     with open(os.path.join(ROOT, "docs", "results", "surface_robustness.md"), "w") as f:
-        f.write("| case | shape | truth held | cloud | visible % | frame turned (°) | at rest (mm) | answer | answer (mm) | supports chosen | flagged | s |\n")
-        f.write("|---|---|---|---|---|---|---|---|---|---|---|---|\n")
+        f.write("| case | shape | truth held | cloud | visible % | frame turned (°) | at rest (mm) | biomechanical (mm) | answer | answer (mm) | "
+                "halves: spread / motion (mm) | supports chosen | flagged | s |\n")
+        f.write("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n")
         for c in cases:
             if c["exit"] != 0:
                 f.write(f"| {c['name']} | {c['shape']} | {c['truth_support']} | {c['cloud']} | {c['visible'] or ''} | {c['frame_turned_deg']:.0f} | "
-                        f"– | **aborted** | – | – | – | – |\n")
+                        f"– | – | **aborted** | – | – | – | – | – |\n")
                 continue
             f.write(f"| {c['name']} | {c['shape']} | {c['truth_support']} | {c['cloud']} | {c['visible'] or ''} | {c['frame_turned_deg']:.0f} | "
-                    f"{c['at_rest_mm']:.2f} | {c['answer']} | {c['answer_mm']:.2f} | {c['support_chosen']} | {'yes' if c['flags'] else ''} | "
+                    f"{c['at_rest_mm']:.2f} | {c['biomechanical_mm']:.2f} | {c['answer']} | {c['answer_mm']:.2f} | {halves_cell(c)} | {c['support_chosen']} | "
+                    f"{'yes' if c['flags'] else ''} | "
                     f"{c['seconds']:.1f} |\n")
         f.write("\n" + "\n".join(f"- {k}: {v:.3g}" if isinstance(v, float) else f"- {k}: {v}" for k, v in summary.items()) + "\n")

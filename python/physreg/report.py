@@ -300,6 +300,15 @@ def safeguard_section(summary):
                     f"<p style='color:#a00'><b>Flagged, kept as asked:</b> {esc(guard.get('statement', ''))}</p>")
         else:
             out += f"<p>{esc(guard.get('statement', ''))}.</p>"
+    halves = summary.get("uncertainty")
+    if isinstance(halves, dict) and halves.get("run"):
+        # Issue 46 item 5: the cloud's two halves registered apart; their spread is twice the answer's standard error.
+        colour = "" if halves.get("resolved") else " style='color:#a00'"
+        out += (f"<p{colour}>Uncertainty (the cloud's random halves): {esc(halves.get('statement', ''))}"
+                + (f"; at the targets, precision {halves['targets_precision_mean_mm']:.2f} mm (mean)" if halves.get("targets_precision_mean_mm") is not None else "")
+                + f". Rule: {esc(halves.get('rule', ''))}.</p>")
+    elif isinstance(halves, dict):
+        out += f"<p>Uncertainty: {esc(halves.get('statement', ''))}.</p>"
     truth = summary.get("truth", {}).get("implied_rigid_motion") if isinstance(summary.get("truth"), dict) else None
     head = "<tr><th>method</th><th>cloud → model mean</th><th>strain energy</th><th>largest displacement</th><th>implied rotation</th><th>rigid start</th></tr>"
     body = []

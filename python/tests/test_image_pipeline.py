@@ -245,6 +245,32 @@ def test_paper001_safeguard_leaves_a_sound_answer_alone(surface_in_memory):
     assert guard["flags"] == [] and guard["answer"] == "biomechanical", guard
 
 
+def test_paper001_the_cloud_halves_resolve_the_push_and_not_noise(surface_in_memory, surface_through_the_command):
+    """Issue 46 item 5: the cloud's two random halves are registered apart. On the push they agree
+    (their spread is a fraction of the motion, and the precision at the targets is reported); on a
+    cloud that is the model's own front jittered by 1 mm noise, with nothing moved, each half chases
+    its own noise: the motion is not resolved, the answer is flagged and the model at rest written."""
+    _, result = surface_in_memory
+    halves = result.summary["uncertainty"]
+    assert halves["run"] and halves["resolved"], halves
+    assert halves["spread_mm"] < 0.75 * halves["motion_mm"] and halves["precision_mm"] == pytest.approx(0.5 * halves["spread_mm"])
+    assert len(halves["targets"]) == 25 and all(t["precision_mm"] >= 0 for t in halves["targets"])
+    assert sum(halves["points_per_half"]) == result.summary["cloud"]["points"]
+    out, _ = surface_through_the_command
+    model = physreg.SurfaceModel.from_mesh(physreg.read_mesh(out / "mesh.vtu"))
+    nodes = model.mesh.nodes
+    surface = np.unique(model.surface_triangles)
+    front = surface[nodes[surface, 1] < np.median(nodes[surface, 1])]
+    noisy = nodes[front] + np.random.default_rng(5).normal(0.0, 1.0, (len(front), 3))
+    r = physreg.register_partial_surface(physreg.PartialSurfaceCase(model, noisy), **SURFACE)
+    halves = r.summary["uncertainty"]
+    guard = r.summary["safeguard"]
+    assert halves["run"] and not halves["resolved"], halves
+    assert any("do not resolve the motion" in f for f in guard["flags"]) and guard["answer"] == "at_rest", guard
+    off = physreg.register_partial_surface(physreg.PartialSurfaceCase(model, noisy), uncertainty="none", **SURFACE)
+    assert not off.summary["uncertainty"]["run"]
+
+
 def test_paper001_repeated_cloud_points_are_left_out_and_said(surface_through_the_command):
     """Issue 46's bad input: a cloud that gives points twice (a scanner's overlapping sweeps) is
     registered as the cloud without the repeats — the same answer — and a note says how many."""

@@ -28,6 +28,8 @@
 #include <limits>
 #include <numeric>
 #include <optional>
+#include <random>
+#include <array>
 #include <set>
 #include <sstream>
 
@@ -358,6 +360,88 @@ double nodal_rms_mm(const std::vector<double>& a, const std::vector<double>& b)
     return std::sqrt(3.0 * sum / static_cast<double>(std::max<std::size_t>(1, a.size())));
 }
 
+/// The cloud-halves check (issue 46 item 5): how well the cloud determines the biomechanical answer,
+/// judged without the truth. The cloud is split at random (the settings' seed) into two halves, each
+/// registered under the chosen supports with its own pair stiffness (the halves' spacing), and the
+/// two answers compared: their mean nodal distance (the spread) has about twice the standard error
+/// of the answer. Chosen on the first 24 small-phantom cases of the robustness study (landmarks:
+/// answers whose motion the halves disagreed on by more than 3/4 were worse than at rest in 6 of 9;
+/// no push case was among them), checked on draws made after it (docs/registration.md).
+json cloud_halves_check(const PartialSurfaceCase& c, const PartialSurfaceSettings& s, const TledModel& model, const SurfaceMatcher& matcher,
+                        SurfaceRegistrationOptions options, const std::vector<double>& answer, const Judges& judges,
+                        const std::function<void(double, const std::string&)>& report)
+{
+    json out = {{"method", "halves"}};
+    const std::size_t n = c.cloud.points.size();
+    if (n < 40) {
+        out["run"] = false;
+        out["statement"] = fmt::format("not run: the cloud has {} points (at least 40: 20 per half)", n);
+        return out;
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    std::vector<std::size_t> order(n);
+    std::iota(order.begin(), order.end(), std::size_t{0});
+    std::mt19937 rng(static_cast<std::uint32_t>(s.seed));
+    std::shuffle(order.begin(), order.end(), rng);
+    std::array<std::vector<double>, 2> u;
+    for (int h = 0; h < 2; ++h) {
+        LabelledPointCloud half;
+        for (std::size_t k = static_cast<std::size_t>(h); k < n; k += 2) {
+            const std::size_t i = order[k];
+            half.points.push_back(c.cloud.points[i]);
+            if (i < c.cloud.labels.size()) half.labels.push_back(c.cloud.labels[i]);
+            if (i < c.cloud.normals.size()) half.normals.push_back(c.cloud.normals[i]);
+        }
+        options.schedules = paper001_schedules(pair_stiffness_n(s.traction, s.young_modulus_pa(), mean_point_spacing_mm(half.points)));
+        const double f0 = 0.75 + 0.025 * h;
+        report(f0, fmt::format("uncertainty: the cloud's half {} of 2", h + 1));
+        u[static_cast<std::size_t>(h)] = register_surface_biomechanical(model, matcher, half, options, [&](double f, const std::string& m) {
+                                             report(f0 + 0.025 * f, m);
+                                         }).displacement_mm;
+    }
+    const std::size_t nodes = c.mesh.node_count();
+    std::vector<double> apart(nodes), moved(nodes);
+    double spread = 0.0, motion = 0.0;
+    for (std::size_t i = 0; i < nodes; ++i) {
+        const Vec3 a(u[0][3 * i], u[0][3 * i + 1], u[0][3 * i + 2]), b(u[1][3 * i], u[1][3 * i + 1], u[1][3 * i + 2]);
+        apart[i] = (a - b).norm();
+        moved[i] = Vec3(answer[3 * i], answer[3 * i + 1], answer[3 * i + 2]).norm();
+        spread += apart[i];
+        motion += moved[i];
+    }
+    spread /= static_cast<double>(nodes);
+    motion /= static_cast<double>(nodes);
+    const bool resolved = motion_resolved_by_halves(spread, motion);
+    out["run"] = true;
+    out["points_per_half"] = {(n + 1) / 2, n / 2};
+    out["spread_mm"] = spread;
+    out["motion_mm"] = motion;
+    out["precision_mm"] = 0.5 * spread;
+    out["largest_spread_mm"] = *std::max_element(apart.begin(), apart.end());
+    out["resolved"] = resolved;
+    out["rule"] = "the answer's mean nodal motion must exceed 4/3 of the mean nodal distance between the two halves' answers";
+    if (c.landmarks) {
+        const auto p0 = displace_landmarks(c.mesh, judges.landmark_cells, *c.landmarks, u[0]);
+        const auto p1 = displace_landmarks(c.mesh, judges.landmark_cells, *c.landmarks, u[1]);
+        json targets = json::array();
+        double sum = 0.0;
+        for (std::size_t k = 0; k < p0.size(); ++k) {
+            const double d = (p0[k].position - p1[k].position).norm();
+            sum += d;
+            targets.push_back({{"name", p0[k].name}, {"precision_mm", 0.5 * d}});
+        }
+        out["targets"] = targets;
+        if (!p0.empty()) out["targets_precision_mean_mm"] = 0.5 * sum / static_cast<double>(p0.size());
+    }
+    out["seconds"] = seconds_since(t0);
+    out["statement"] = resolved ? fmt::format("the cloud's two halves agree on the motion: {:.2f} mm apart against {:.2f} mm of motion (mean over the nodes); "
+                                              "precision about {:.2f} mm", spread, motion, 0.5 * spread)
+                                : fmt::format("the data do not resolve the motion: the cloud's two halves place the model {:.2f} mm apart, against {:.2f} mm "
+                                              "of motion (mean over the nodes; at least 4/3 of the spread is needed)", spread, motion);
+    logger()->info("register-surface: uncertainty: {}", out["statement"].get<std::string>());
+    return out;
+}
+
 struct SupportDecision {
     std::size_t chosen = 0;
     std::vector<SurfaceRegistrationResult> runs; ///< one per hypothesis tried, in order
@@ -520,6 +604,10 @@ const SettingsSpec<PartialSurfaceSettings>& partial_surface_spec()
                   "rigid baselines: a pose that moves a support node farther than this is implausible, mm", 0.0, unbounded, true)
             .real("noise", "--noise", &S::noise, "mm", "the cloud's noise σ, mm, for the discrepancy principle that picks the supports (--support auto) and the adjoint method's regularisation weight",
                   0.0, unbounded, true)
+            .choice("uncertainty", "--uncertainty", &S::uncertainty, {"halves", "none"},
+                    "halves (default): the cloud is split at random into two halves, each registered by the biomechanical method under the chosen "
+                    "supports; how far apart they place the model is the answer's precision (summary: uncertainty), and a motion smaller than 4/3 "
+                    "of that spread is flagged as not resolved by the data (the safeguard); none: skip it (two registrations faster)")
             .real("time_step", "--time-step", &S::time_step, "s", "backward Euler time step, s", 0.0, unbounded, true)
             .real("plateau_tolerance", "--plateau-tolerance", &S::plateau_tolerance, "mm", "a plateau ends when no node moves more than this in a step, mm…", 0.0,
                   unbounded, true)
@@ -533,7 +621,7 @@ const SettingsSpec<PartialSurfaceSettings>& partial_surface_spec()
             .real("surface_scale", "--surface-scale", &S::surface_scale, "", "--surface: factor to mm (e.g. 1000 for SOFA meshes in metres)", 0.0, unbounded, true)
             .real("vessel_scale", "--vessel-scale", &S::vessel_scale, "", "--vessels: factor to mm (e.g. 1000 for metres)", 0.0, unbounded, true)
             .real("vessel_radius", "--vessel-radius", &S::vessel_radius, "mm", "--vessels: radius of files without radii, mm", 0.0, unbounded, true)
-            .integer("seed", "--seed", &S::seed, "seed of the CGAL mesher", 0, 2147483647);
+            .integer("seed", "--seed", &S::seed, "seed of the CGAL mesher and of the cloud's random halves (--uncertainty)", 0, 2147483647);
         return s;
     }();
     return spec;
@@ -554,8 +642,10 @@ void validate(const PartialSurfaceSettings& s, SettingNaming naming)
 /// than 5 % and 0.1 mm), or that the data do not determine, is flagged; with the conservative
 /// setting the answer becomes the model at rest, or the rigid fit when that removes more than half
 /// of the residual at rest and the rigid starts agree on the pose.
+bool motion_resolved_by_halves(double spread_mm, double motion_mm) { return motion_mm >= 4.0 / 3.0 * spread_mm; }
+
 PartialSurfaceSafeguard judge_deformable_answer(const json& evaluated, const json& determinacy_json, bool rigid_pose_determined,
-                                                const std::string& requested, const std::string& mode, double noise_level_mm)
+                                                const std::string& requested, const std::string& mode, double noise_level_mm, const json& halves)
 {
     PartialSurfaceSafeguard g;
     g.requested = requested;
@@ -582,6 +672,9 @@ PartialSurfaceSafeguard judge_deformable_answer(const json& evaluated, const jso
     if (rest_explains)
         g.flags.push_back(fmt::format("the model left at rest already meets the cloud to the noise ({:.2f} mm against {:.2f} mm): the data show no motion "
                                       "beyond it", fit("at_rest"), noise_level_mm));
+    // The halves check (issue 46 item 5): a motion the cloud's two halves do not agree on is noise.
+    if (halves.is_object() && halves.contains("resolved") && !halves["resolved"].get<bool>() && requested == "biomechanical")
+        g.flags.push_back(halves.value("statement", std::string("the data do not resolve the motion")));
     if (!determinacy_json["pose_determined"].get<bool>()) {
         std::vector<std::string> notes;
         for (const auto& n : determinacy_json["notes"]) notes.push_back(n.get<std::string>());
@@ -723,6 +816,10 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, c
         logger()->info("register-surface: {} support nodes ({}) {}", options.fixed_nodes.size(), held.name,
                        held.stiffness > 0 ? fmt::format("on springs of {} N/mm", held.stiffness) : std::string("held at rest"));
 
+    // 3b. How well the cloud determines that answer (issue 46 item 5): its two halves registered apart.
+    json uncertainty = {{"method", s.uncertainty}, {"run", false}, {"statement", "not run (--uncertainty none)"}};
+    if (s.uncertainty == "halves") uncertainty = cloud_halves_check(c, s, model, matcher, options, b.displacement_mm, judges, report);
+
     // 4. Every method; the chosen one is the answer, the others are the report's baselines.
     auto& methods = result.methods;
     methods.push_back({"at_rest", std::vector<double>(3 * c.mesh.node_count(), 0.0), 0.0, json::object()});
@@ -742,7 +839,7 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, c
     json evaluated;
     for (const auto& m : methods) evaluated[m.name] = evaluate(m, c, judges);
     const json determined = determinacy(methods, evaluated, rigid_pose_determined);
-    result.safeguard = judge_deformable_answer(evaluated, determined, rigid_pose_determined, s.method, s.safeguard, discrepancy_level_mm(s));
+    result.safeguard = judge_deformable_answer(evaluated, determined, rigid_pose_determined, s.method, s.safeguard, discrepancy_level_mm(s), uncertainty);
     if (!result.safeguard.flags.empty()) logger()->warn("register-surface: {}", result.safeguard.statement);
     for (std::size_t k = 0; k < methods.size(); ++k)
         if (methods[k].name == result.safeguard.answer) result.chosen = k;
@@ -762,6 +859,7 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, c
                            {"stiffness_n_per_mm", held.stiffness}, {"nodes", held.supports.nodes}, {"rigid_plausibility_tolerance_mm", s.support_tolerance}};
     summary["support_hypotheses"] = decision.report;
     summary["determinacy"] = determined;
+    summary["uncertainty"] = uncertainty;
     summary["safeguard"] = {{"flags", result.safeguard.flags}, {"requested", result.safeguard.requested}, {"answer", result.safeguard.answer},
                             {"setting", s.safeguard}, {"statement", result.safeguard.statement}};
     if (c.truth_mesh) {

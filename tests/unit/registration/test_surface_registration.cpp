@@ -735,6 +735,25 @@ TEST(PartialSurfaceSafeguard, ADeformableAnswerThatFitsWorseThanTheRigidFitGives
     EXPECT_TRUE(judge_deformable_answer(methods(0.44, 0.37, 0.11), determined, true, "biomechanical", "conservative", 0.6).flags.empty());
     // A rigid answer asked for is not judged.
     EXPECT_TRUE(judge_deformable_answer(methods(5.0, 7.0, 8.0), determined, true, "rigid", "conservative", 0.6).flags.empty());
+    // The cloud's halves disagree on the motion (issue 46 item 5): flagged, the model at rest written;
+    // the same fit with halves that agree is not flagged.
+    const nlohmann::json unresolved = {{"resolved", false}, {"statement", "the data do not resolve the motion: 0.30 mm apart against 0.20 mm"}};
+    const auto noisy = judge_deformable_answer(methods(1.2, 1.1, 0.9), determined, true, "biomechanical", "conservative", 0.6, unresolved);
+    ASSERT_EQ(noisy.flags.size(), 1u);
+    EXPECT_NE(noisy.flags[0].find("do not resolve the motion"), std::string::npos) << noisy.flags[0];
+    EXPECT_EQ(noisy.answer, "at_rest");
+    EXPECT_TRUE(judge_deformable_answer(methods(1.2, 1.1, 0.9), determined, true, "biomechanical", "conservative", 0.6, {{"resolved", true}}).flags.empty());
+}
+
+// The halves' rule: the motion must stand 4/3 of the halves' spread clear (about 2.7 standard
+// errors of the answer, the halves' difference having twice the answer's).
+TEST(PartialSurfaceSafeguard, AMotionIsResolvedWhenItExceedsFourThirdsOfTheHalvesSpread)
+{
+    EXPECT_TRUE(motion_resolved_by_halves(0.61, 3.11));  // the study's push (c18, landmarks): resolved
+    EXPECT_TRUE(motion_resolved_by_halves(0.29, 0.40));  // just over 4/3
+    EXPECT_FALSE(motion_resolved_by_halves(0.31, 0.40));
+    EXPECT_FALSE(motion_resolved_by_halves(0.23, 0.10)); // a 10 % noisy patch (c08): the halves disagree more than it moved
+    EXPECT_TRUE(motion_resolved_by_halves(0.0, 0.0));    // nothing moved and nothing disagrees
 }
 
 } // namespace physreg

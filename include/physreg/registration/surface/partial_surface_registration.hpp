@@ -54,6 +54,7 @@ struct PartialSurfaceSettings {
     double spring_stiffness = 0.0;            ///< N/mm, the springs hypothesis; 0: 0.01 × E × mean edge
     double support_tolerance = 3.0;           ///< mm
     double noise = 0.5;                       ///< mm, the adjoint method's discrepancy principle
+    std::string uncertainty = "halves";       ///< halves: the cloud's two random halves registered apart (precision, resolved motion); none
     double time_step = 0.1;                   ///< s
     double plateau_tolerance = 0.01;          ///< mm
     double plateau_rms_fraction = 0.5;
@@ -134,8 +135,18 @@ struct PartialSurfaceResult {
 /// `setting` conservative then answers the model at rest, or the rigid fit when it removes more than
 /// half of the cloud-to-model distance at rest and the rigid starts agree on the pose (and at rest
 /// does not already meet the noise); keep keeps it.
+/// `halves` (optional) is the cloud-halves check: {"resolved": false, "statement": …} flags an
+/// answer whose motion the two halves of the cloud do not agree on (summary.json's "uncertainty").
 PartialSurfaceSafeguard judge_deformable_answer(const nlohmann::json& evaluated, const nlohmann::json& determinacy, bool rigid_pose_determined,
-                                                const std::string& requested, const std::string& setting, double noise_level_mm);
+                                                const std::string& requested, const std::string& setting, double noise_level_mm,
+                                                const nlohmann::json& halves = nlohmann::json::object());
+
+/// The cloud-halves check's decision (issue 46 item 5), apart from the registrations that feed it:
+/// `spread_mm` is the mean distance between the two halves' answers, `motion_mm` the mean motion of
+/// the answer (both over the same points: model nodes or targets). The motion is resolved when it
+/// exceeds 4/3 of the spread (the halves' difference has twice the standard error of the answer,
+/// so the motion then stands at least 2.7 standard errors clear of none).
+bool motion_resolved_by_halves(double spread_mm, double motion_mm);
 
 /// Runs the pipeline. `progress(fraction, message)`. Throws Error for bad input (supports off the
 /// model, a cloud far from it) and when the chosen method fails.
