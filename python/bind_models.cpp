@@ -201,9 +201,11 @@ void bind_surface_model(py::module_& m)
           py::arg("poisson_ratio") = 0.45, py::arg("traction_ratio") = 0.5, py::arg("support") = "posterior", py::arg("support_nodes") = py::none(),
           py::arg("progress") = py::none(),
           "Paper 001's biomechanical registration of `model` to a cloud held in memory — points (N, 3) mm LPS, optional int32 feature "
-          "labels (N,) (default: all 0, surface) and outward normals (N, 3) — with register-surface's defaults (co-rotational tetrahedra, "
-          "backward Euler, arctan pair forces annealed over paper 001's schedules, the posterior surface held). progress(fraction, "
-          "message) after every plateau. Returns a SurfaceRegistration.");
+          "labels (N,) (default: all 0, surface) and outward normals (N, 3) — by the biomechanical method alone (co-rotational tetrahedra, "
+          "backward Euler, arctan pair forces annealed over paper 001's schedules) with the supports given here: support 'posterior' "
+          "(default: the posterior surface held) or 'none', plus support_nodes. No support hypotheses, rigid baselines, cloud-halves "
+          "check or safeguard: register_partial_surface runs register-surface's whole pipeline (its default support is 'auto'). "
+          "progress(fraction, message) after every plateau. Returns a SurfaceRegistration.");
 
 }
 

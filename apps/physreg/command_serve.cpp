@@ -164,7 +164,7 @@ ImageRegistrationResult register_segmentation_pair(const CompressionSubject& sub
         for (const auto l : *role)
             if (present.count(l)) pair.default_structures.push_back(l);
     std::sort(pair.default_structures.begin(), pair.default_structures.end());
-    pair.auto_hold = "posterior";
+    pair.auto_hold = "none"; // as for datasets: no support assumed (docs/registration.md, paper 002's holds)
     pair.description = {{"moving", "the served subject's rest labels"}, {"fixed", "OpenIGTLink IMAGE '" + device + "'"}};
     ImageRegistrationSettings settings;
     settings.baselines = "none";

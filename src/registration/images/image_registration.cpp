@@ -319,7 +319,8 @@ const SettingsSpec<ImageRegistrationSettings>& image_registration_spec()
                   0.0, 180.0, true)
             .choice("baselines", "--baselines", &S::baselines, {"all", "intensity", "labels", "none"}, "baselines in the report: all, intensity, labels or none")
             .choice("hold", "--hold", &S::hold, {"auto", "posterior", "none"},
-                    "Dirichlet support: posterior (surface nodes facing +y), none, or auto (posterior for datasets, else none)")
+                    "Dirichlet support: posterior (surface nodes facing +y), none, or auto (the pair's own recommendation: none for datasets and "
+                    "served segmentations since issue 46 — the segmentation drives the whole boundary, and a held face keeps the initial alignment's error)")
             .labels("structures", "--structures", &S::structures, "labels to mesh and match, e.g. 2,3,4,6 (default: every label of the moving segmentation)")
             .labels("hold_labels", "--hold-labels", &S::hold_labels, "labels (meshed with the structures) whose nodes are held, e.g. bone")
             .real("anchor", "--anchor", &S::anchor, "N/mm", "regularising spring to rest at every node, N/mm (0: none)", 0.0)
