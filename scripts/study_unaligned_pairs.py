@@ -179,7 +179,7 @@ for seed in [int(s) for s in args.seeds.split(",")]:
             truth_support = ["posterior", "inferior", "superior", "left", "right"][int(np.random.default_rng(2000 + 97 * seed + len(rows) + len(refusals)).integers(5))]
             phantom_args += ["--organ-support", truth_support]
         try:
-            phantom_s = run([args.physreg, "--log-level", "warn", "phantom", *phantom_args, "--materials", "healthy", "--organs-only", *([] if "--depths" in phantom_args else ["--depths", "5"]), "--no-calculix",
+            phantom_s = run([args.physreg, "--log-level", "warn", "phantom", *phantom_args, "--materials", "healthy", "--organs-only", *([] if "--depths" in phantom_args else ["--depths", "5" if case.get("state") == "A" else "none"]), "--no-calculix",
                              "--seed", str(seed), "-o", dataset, "--force"], os.path.join(folder, "phantom.log"))
         except SystemExit as refused:
             # The generator has no equilibrium for this organ held there (a lobe swinging about its
