@@ -162,6 +162,7 @@ if args.cases:
         raise SystemExit(f"--cases {args.cases}: no such case")
 rows = []
 refusals = []
+failures = []
 for seed in [int(s) for s in args.seeds.split(",")]:
     rng = np.random.default_rng(1000 + seed)
     for case in cases:
@@ -186,7 +187,7 @@ for seed in [int(s) for s in args.seeds.split(",")]:
             # support): recorded as refused by the generator, not counted as a registration.
             print(f"{name}: the generator refused the truth held {truth_support} ({refused})", flush=True)
             refusals.append({"case": name, "truth_support": truth_support})
-            json.dump({"cases": rows, "refused_by_generator": refusals, "cycles": args.cycles}, open(os.path.join(args.work, "study.json"), "w"), indent=1)
+            json.dump({"cases": rows, "refused_by_generator": refusals, "register_failures": failures, "cycles": args.cycles}, open(os.path.join(args.work, "study.json"), "w"), indent=1)
             continue
         R, t, angle = draw_offset(rng)
         state = os.path.join(dataset, "states", case.get("state", "insufflation"))
@@ -200,12 +201,20 @@ for seed in [int(s) for s in args.seeds.split(",")]:
         move_landmarks(os.path.join(state, "landmarks.csv"), os.path.join(folder, "fixed_landmarks.csv"), R, t, centre)
         rest = os.path.join(dataset, "rest")
         out = os.path.join(folder, "register")
-        register_s = run([args.physreg, "--no-report", "--log-level", "warn", "register-images", "--fixed", os.path.join(folder, "fixed.nii.gz"),
-                          "--fixed-labels", os.path.join(folder, "fixed_labels.nii.gz"), "--moving", os.path.join(rest, "intensity.nii.gz"),
-                          "--moving-labels", os.path.join(rest, "labels.nii.gz"), "--landmarks-fixed", os.path.join(folder, "fixed_landmarks.csv"),
-                          "--landmarks-moving", os.path.join(rest, "landmarks.csv"), "--cycles", str(args.cycles),
-                          "--cell-size", case.get("cell_size", "6"), "--seed", str(seed), "-o", out, "--force"]
-                         + (["--structures", case["structures"]] if "structures" in case else []), os.path.join(folder, "register.log"))
+        try:
+          register_s = run([args.physreg, "--no-report", "--log-level", "warn", "register-images", "--fixed", os.path.join(folder, "fixed.nii.gz"),
+                            "--fixed-labels", os.path.join(folder, "fixed_labels.nii.gz"), "--moving", os.path.join(rest, "intensity.nii.gz"),
+                            "--moving-labels", os.path.join(rest, "labels.nii.gz"), "--landmarks-fixed", os.path.join(folder, "fixed_landmarks.csv"),
+                            "--landmarks-moving", os.path.join(rest, "landmarks.csv"), "--cycles", str(args.cycles),
+                            "--cell-size", case.get("cell_size", "6"), "--seed", str(seed), "-o", out, "--force"]
+                           + (["--structures", case["structures"]] if "structures" in case else []), os.path.join(folder, "register.log"))
+        except SystemExit as failed:
+            # A crash or an error of register-images is a result of the study, not its end.
+            print(f"{name}: register-images failed ({failed})", flush=True)
+            failures.append({"case": name, "truth_support": truth_support, "error": str(failed)})
+            json.dump({"cases": rows, "refused_by_generator": refusals, "register_failures": failures, "cycles": args.cycles},
+                      open(os.path.join(args.work, "study.json"), "w"), indent=1)
+            continue
         summary = json.load(open(os.path.join(out, "summary.json")))
         methods = {}
         for method, m in summary["methods"].items():
@@ -229,7 +238,7 @@ for seed in [int(s) for s in args.seeds.split(",")]:
               f"biomechanical {bio.get('tre_mm', float('nan')):.2f}, rigid labels {rigid.get('tre_mm', float('nan')):.2f}, "
               f"demons labels {methods.get('demons_labels', {}).get('tre_mm', float('nan')):.2f} mm ({register_s:.0f} s)", flush=True)
         # Written after every case: a long run stopped half-way keeps what it measured.
-        json.dump({"cases": rows, "refused_by_generator": refusals, "cycles": args.cycles}, open(os.path.join(args.work, "study.json"), "w"), indent=1)
+        json.dump({"cases": rows, "refused_by_generator": refusals, "register_failures": failures, "cycles": args.cycles}, open(os.path.join(args.work, "study.json"), "w"), indent=1)
 worse = [r["case"] for r in rows if r["methods"].get("biomechanical", {}).get("tre_mm", 1e9) > r["methods"].get("rigid_labels", {}).get("tre_mm", -1)]
 print(f"biomechanical TRE ≤ rigid labels on {len(rows) - len(worse)} of {len(rows)} pairs" + (f"; worse on {', '.join(worse)}" if worse else ""))
 flipped = [r["case"] for r in rows if r["recovered"]["flipped"]]

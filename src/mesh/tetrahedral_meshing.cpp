@@ -218,7 +218,34 @@ void TetMeshingOptions::validate() const
         fail("tetrahedral meshing: radius_edge_ratio = {} must be ≥ 2 (Delaunay refinement cannot guarantee less)", radius_edge_ratio);
 }
 
+namespace {
+VolumeMesh mesh_axis_aligned_labels(const LabelVolume& labels, const TetMeshingOptions& options, const std::string& what);
+} // namespace
+
+// CGAL meshes the labels in the grid's own axes: a volume whose direction cosines are turned (a
+// segmentation resampled onto a turned fixed grid, register-images' initial alignment) is meshed
+// with the identity direction and its nodes turned back about the origin. Meshed in the turned frame,
+// CGAL 5.5's refinement dereferenced an uninitialised cell and crashed (SIGSEGV; the small preset
+// aligned onto a grid turned 10°, seeds 2 and 3 alike); CGAL's own tests mesh axis-aligned images.
 VolumeMesh mesh_labels_tetrahedral(const LabelVolume& labels, const TetMeshingOptions& options, const std::string& what)
+{
+    options.validate();
+    labels.geometry.validate(what);
+    const Mat3& direction = labels.geometry.direction;
+    if ((direction - Mat3::Identity()).cwiseAbs().maxCoeff() < 1e-12) return mesh_axis_aligned_labels(labels, options, what);
+    LabelVolume axis_aligned = labels;
+    axis_aligned.geometry.direction = Mat3::Identity();
+    VolumeMesh mesh = mesh_axis_aligned_labels(axis_aligned, options, what);
+    const Vec3 origin = labels.geometry.origin;
+    for (auto& x : mesh.nodes) x = origin + direction * (x - origin);
+    if (direction.determinant() < 0) // a reflection turns every tetrahedron inside out: reorder its nodes
+        for (std::size_t c = 0; c < mesh.cell_count(); ++c) std::swap(mesh.cells[4 * c + 1], mesh.cells[4 * c + 2]);
+    mesh.validate(what);
+    return mesh;
+}
+
+namespace {
+VolumeMesh mesh_axis_aligned_labels(const LabelVolume& labels, const TetMeshingOptions& options, const std::string& what)
 {
     options.validate();
     labels.geometry.validate(what);
@@ -303,6 +330,7 @@ VolumeMesh mesh_labels_tetrahedral(const LabelVolume& labels, const TetMeshingOp
     }
     return mesh;
 }
+} // namespace
 
 TetrahedronQuality measure_tetrahedra(const VolumeMesh& mesh)
 {

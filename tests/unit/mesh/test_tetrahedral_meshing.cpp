@@ -5,6 +5,7 @@
 #include "physreg/mesh/tetrahedral_meshing.hpp"
 #include "test_support.hpp"
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -74,6 +75,44 @@ TEST(TetrahedralMeshing, SphereInCubeIsConformingAndCloseToTheTrueVolumes)
     EXPECT_GT(q.min_dihedral_deg, 1.0);
     EXPECT_GT(q.mean_radius_ratio, 0.6);
     EXPECT_LE(q.max_edge_mm, 4.0 * 2.0 + 1e-9); // circumradius 4 mm bounds the edge by 8 mm
+}
+
+// A volume whose direction cosines are turned (a segmentation resampled onto a turned grid) or
+// mirrored is meshed in its grid's own axes: the mesh is the axis-aligned volume's mesh turned about
+// the origin, node for node, its tetrahedra positively oriented, and the sphere where the turned
+// geometry puts it.
+TEST(TetrahedralMeshing, ATurnedOrMirroredGridIsMeshedInItsOwnAxes)
+{
+    const LabelVolume straight = sphere_in_cube();
+    const VolumeMesh reference = mesh_labels_tetrahedral(straight, options(), "straight");
+    for (const bool mirrored : {false, true}) {
+        LabelVolume turned = straight;
+        Mat3 d = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+        if (mirrored) d.col(2) *= -1.0;
+        turned.geometry.direction = d;
+        const VolumeMesh mesh = mesh_labels_tetrahedral(turned, options(), "turned");
+        ASSERT_EQ(mesh.node_count(), reference.node_count());
+        ASSERT_EQ(mesh.cell_count(), reference.cell_count());
+        const Vec3 o = straight.geometry.origin;
+        for (std::size_t n = 0; n < mesh.node_count(); ++n)
+            ASSERT_LT((mesh.nodes[n] - (o + d * (reference.nodes[n] - o))).norm(), 1e-9) << "node " << n;
+        double sphere = 0.0;
+        for (std::size_t c = 0; c < mesh.cell_count(); ++c) {
+            const auto n = mesh.cell(c);
+            const Vec3 a = mesh.nodes[n[1]] - mesh.nodes[n[0]], b = mesh.nodes[n[2]] - mesh.nodes[n[0]], e = mesh.nodes[n[3]] - mesh.nodes[n[0]];
+            const double v = a.cross(b).dot(e) / 6.0;
+            ASSERT_GT(v, 0.0) << "cell " << c << (mirrored ? " (mirrored grid)" : " (turned grid)");
+            if (mesh.cell_labels[c] == 2) sphere += v;
+        }
+        EXPECT_NEAR(sphere, 4.0 / 3.0 * M_PI * 1000.0, 0.02 * 4.0 / 3.0 * M_PI * 1000.0);
+        // The sphere's centre (index 39.5 in each axis) is where the turned geometry maps it.
+        const Vec3 centre = turned.geometry.index_to_physical(Vec3::Constant(39.5));
+        double worst = 0.0;
+        for (std::size_t c = 0; c < mesh.cell_count(); ++c)
+            if (mesh.cell_labels[c] == 2)
+                for (const auto node : mesh.cell(c)) worst = std::max(worst, (mesh.nodes[static_cast<std::size_t>(node)] - centre).norm());
+        EXPECT_LT(worst, 10.4);
+    }
 }
 
 TEST(TetrahedralMeshing, SameSeedSameMeshAndBadInputIsRefused)
