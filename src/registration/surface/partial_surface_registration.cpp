@@ -827,7 +827,14 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, c
 
     // 3b. How well the cloud determines that answer (issue 46 item 5): its two halves registered apart.
     json uncertainty = {{"method", s.uncertainty}, {"run", false}, {"statement", "not run (--uncertainty none)"}};
-    if (s.uncertainty == "halves") uncertainty = cloud_halves_check(c, s, model, matcher, options, b.displacement_mm, judges, report);
+    if (s.uncertainty == "halves") {
+        // The halves are held exactly as the answer was (the springs hypothesis ties every node;
+        // `options` has by now only what the rigid fits' plausibility needs).
+        SurfaceRegistrationOptions held_as_answer = options;
+        held_as_answer.fixed_nodes = held.supports.nodes;
+        held_as_answer.support_stiffness_n_per_mm = held.stiffness;
+        uncertainty = cloud_halves_check(c, s, model, matcher, held_as_answer, b.displacement_mm, judges, report);
+    }
 
     // 4. Every method; the chosen one is the answer, the others are the report's baselines.
     auto& methods = result.methods;
