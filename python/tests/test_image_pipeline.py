@@ -232,6 +232,11 @@ def test_paper001_supports_the_data_contradict_are_left_out(surface_through_the_
     assert [h["name"] for h in decision["hypotheses"]] == ["posterior", "springs"] and decision["chosen"] == "springs", decision
     assert tried["posterior"]["cloud_to_model_mm"]["mean"] > tried[decision["chosen"]]["cloud_to_model_mm"]["mean"] + 0.1, decision
     assert r.summary["support"] == decision["chosen"]
+    # The cloud's halves are held as the answer was: springs at every node, as stiff (a first version ran them free).
+    halves = r.summary["uncertainty"]
+    assert halves["supports"] == "springs" and halves["support_nodes"] == r.summary["model"]["nodes"], halves
+    assert halves["support_stiffness_n_per_mm"] == pytest.approx(r.summary["supports"]["stiffness_n_per_mm"]) and halves["support_stiffness_n_per_mm"] > 0
+    assert halves["resolved"], halves
     assert any("contradict the posterior supports" in n for n in r.summary["notes"]), r.summary["notes"]
     methods = r.summary["methods"]
     assert methods["at_rest"]["tre"]["all"]["mean_mm"] == pytest.approx(10.0)

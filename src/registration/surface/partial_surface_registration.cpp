@@ -834,6 +834,9 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, c
         held_as_answer.fixed_nodes = held.supports.nodes;
         held_as_answer.support_stiffness_n_per_mm = held.stiffness;
         uncertainty = cloud_halves_check(c, s, model, matcher, held_as_answer, b.displacement_mm, judges, report);
+        uncertainty["supports"] = held.name;
+        uncertainty["support_nodes"] = held.supports.nodes.size();
+        uncertainty["support_stiffness_n_per_mm"] = held.stiffness;
     }
 
     // 4. Every method; the chosen one is the answer, the others are the report's baselines.
