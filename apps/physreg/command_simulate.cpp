@@ -124,6 +124,7 @@ nlohmann::json write_simulation_outputs(const SimulationCase& c, const Simulatio
                               {"method", to_string(c.method)},
                               {"mode", c.dynamic ? "dynamic" : "static"},
                               {"precision", c.single_precision ? "single" : "double"},
+                              {"device", to_string(c.device)},
                               {"material_law", to_string(c.tled.law)},
                               {"mesh", mesh_summary(result.mesh)},
                               {"critical_time_step_s", result.critical_time_step_s},
@@ -143,16 +144,27 @@ nlohmann::json write_simulation_outputs(const SimulationCase& c, const Simulatio
 void add_subcommand_simulate(CLI::App& app)
 {
     struct Options : CommonOptions {
-        std::string case_file, output;
+        std::string case_file, output, device;
     };
     auto o = std::make_shared<Options>();
     auto* sub = app.add_subcommand("simulate", "Run a TLED simulation described by a case file (YAML)");
     sub->add_option("case", o->case_file, "Case file (see docs/simulate.md)")->required();
     sub->add_option("-o,--output", o->output, "Output directory (instead of the case file's `output`)");
     sub->add_flag("--json", o->json, "Print the JSON summary on stdout");
+    sub->add_option("--device", o->device,
+                    "Where explicit dynamics runs: cpu, gpu (CUDA; refused with the reason when this build or machine has none) or "
+                    "gpu-emulation (the GPU algorithm on the host, for checking); default: the case's solver.device, else cpu");
     sub->callback([o] {
         SimulationCase c = read_simulation_case(o->case_file);
         if (!o->output.empty()) c.output_directory = o->output;
+        if (!o->device.empty()) {
+            c.device = parse_device(o->device);
+            check_device(c, "--device " + o->device);
+            if (c.device == Device::gpu) {
+                const GpuStatus status = gpu_status();
+                if (!status.usable()) fail("--device gpu: {}", status.reason);
+            }
+        }
         ProgressDisplay bar("simulate");
         const SimulationResult result = run_simulation(c, [&](double f, const std::string& m) { bar.update(f, m); });
         bar.finish();

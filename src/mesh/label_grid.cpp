@@ -178,20 +178,32 @@ VolumeMesh hex_mesh_from_label_grid(const LabelGrid& grid)
     mesh.cell_grid_index.reserve(occupied);
     static constexpr int corner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
                                          {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+    // Nodes are numbered in the scan order of the node grid (x fastest), not in order of first
+    // use: neighbours along x get consecutive numbers, so the elements of a row have node numbers
+    // that advance by one from element to element, which the TLED force kernel loads and stores
+    // as contiguous vectors (hexahedron_kernel.hpp), and a layer of elements touches two planes of
+    // consecutive nodes.
+    for (std::int64_t k = 0; k < d[2]; ++k)
+        for (std::int64_t j = 0; j < d[1]; ++j)
+            for (std::int64_t i = 0; i < d[0]; ++i) {
+                if (!grid.at(i, j, k)) continue;
+                for (const auto& c : corner) node_id[static_cast<std::size_t>(i + c[0] + nd[0] * (j + c[1] + nd[1] * (k + c[2])))] = 0;
+            }
+    for (std::int64_t nk = 0; nk < nd[2]; ++nk)
+        for (std::int64_t nj = 0; nj < nd[1]; ++nj)
+            for (std::int64_t ni = 0; ni < nd[0]; ++ni) {
+                auto& id = node_id[static_cast<std::size_t>(ni + nd[0] * (nj + nd[1] * nk))];
+                if (id < 0) continue;
+                id = static_cast<std::int32_t>(mesh.nodes.size());
+                mesh.nodes.push_back(grid.geometry.node_position(ni, nj, nk));
+            }
     for (std::int64_t k = 0; k < d[2]; ++k)
         for (std::int64_t j = 0; j < d[1]; ++j)
             for (std::int64_t i = 0; i < d[0]; ++i) {
                 const auto label = grid.at(i, j, k);
                 if (!label) continue;
-                for (const auto& c : corner) {
-                    const std::int64_t ni = i + c[0], nj = j + c[1], nk = k + c[2];
-                    auto& id = node_id[static_cast<std::size_t>(ni + nd[0] * (nj + nd[1] * nk))];
-                    if (id < 0) {
-                        id = static_cast<std::int32_t>(mesh.nodes.size());
-                        mesh.nodes.push_back(grid.geometry.node_position(ni, nj, nk));
-                    }
-                    mesh.cells.push_back(id);
-                }
+                for (const auto& c : corner)
+                    mesh.cells.push_back(node_id[static_cast<std::size_t>(i + c[0] + nd[0] * (j + c[1] + nd[1] * (k + c[2])))]);
                 mesh.cell_labels.push_back(label);
                 mesh.cell_grid_index.push_back({i, j, k});
             }

@@ -155,8 +155,25 @@ grep -q '"displacement_field"' "$work/out.txt" && pass || failed "the field read
 expect_ok "locate with field" "$physreg" landmarks locate "$work/sim/final.vtu" "$d/landmarks.csv" --field displacement -o "$work/moved.csv"
 grep -q "displacement_2" "$work/moved.csv" && pass || failed "displacement interpolated at landmarks"
 sed 's/mode: static, load_steps: 2/mode: dynamic, duration_s: 0.002, ramp_time_s: 0.001, damping_per_s: 50/; s/directory: sim/directory: dyn/' "$work/push.yaml" > "$work/dyn.yaml"
-expect_ok "simulate dynamic" "$physreg" simulate "$work/dyn.yaml"
+expect_ok "simulate dynamic" "$physreg" simulate "$work/dyn.yaml" --json
 expect_file "$work/dyn/final.vtu"
+cpu_peak=$(sed -n 's/.*"max_displacement_mm": \([0-9.e+-]*\).*/\1/p' "$work/dyn/summary.json")
+# The GPU path (issue 45): its algorithm on the host gives the CPU's answer; --device gpu runs on a
+# device or is refused naming why; outside explicit dynamics it is refused.
+expect_ok "simulate dynamic, gpu-emulation" "$physreg" simulate "$work/dyn.yaml" --device gpu-emulation -o "$work/dyn_emulated"
+grep -q '"device": "gpu-emulation"' "$work/dyn_emulated/summary.json" && pass || failed "summary names the device"
+emulated_peak=$(sed -n 's/.*"max_displacement_mm": \([0-9.e+-]*\).*/\1/p' "$work/dyn_emulated/summary.json")
+awk -v a="$cpu_peak" -v b="$emulated_peak" 'BEGIN { d = a - b; if (d < 0) d = -d; exit !(a > 0 && d <= 1e-9 * a) }' && pass \
+  || failed "gpu-emulation peak $emulated_peak mm differs from the cpu's $cpu_peak mm"
+if "$physreg" simulate "$work/dyn.yaml" --device gpu -o "$work/dyn_gpu" >"$work/out.txt" 2>"$work/err.txt"; then
+  grep -q '"device": "gpu"' "$work/dyn_gpu/summary.json" && pass || failed "gpu summary names the device"
+else
+  grep -qE -- "--device gpu: (this physreg was built without|no usable CUDA device|no CUDA device)" "$work/err.txt" && pass \
+    || { failed "--device gpu refused without naming why:"; cat "$work/err.txt"; }
+  [ ! -e "$work/dyn_gpu" ] && pass || failed "no outputs after a refused --device gpu"
+fi
+expect_error "simulate: gpu for a static case" "runs explicit dynamics only" "$physreg" simulate "$work/push.yaml" --device gpu -o "$work/static_gpu"
+expect_error "simulate: unknown device" "expected cpu, gpu or gpu-emulation" "$physreg" simulate "$work/dyn.yaml" --device cuda -o "$work/cuda"
 printf 'tissues:\n  - {label: 1, name: p, young_modulus_pa: 2e5, poisson_ratio: 0.5}\n  - {label: 2, name: v, young_modulus_pa: 1e6, poisson_ratio: 0.49}\n  - {label: 3, name: t, young_modulus_pa: 5e6, poisson_ratio: 0.49}\n' > "$work/nu.yaml"
 sed "s|tissues: .*|tissues: $work/nu.yaml|; s/directory: sim/directory: bad1/" "$work/push.yaml" > "$work/bad1.yaml"
 expect_error "simulate: impossible Poisson ratio" "poisson_ratio" "$physreg" simulate "$work/bad1.yaml"

@@ -3,8 +3,14 @@
 // The hot loop of TLED: forces of a batch of W uniform-strain hexahedra with hourglass control.
 // Elements of a batch sit in SIMD lanes: node values are gathered into lane-major stack arrays,
 // all arithmetic runs over the lanes (the compiler vectorises the `omp simd` loops), and forces
-// are scattered back node by node. Elements of one colour share no node, so the scatter is race
-// free. (A GPU port would map one lane to one thread; there is none yet.)
+// are scattered back node by node. Elements of one chunk of a phase share no node with another
+// chunk of it, so the scatter is race free.
+//
+// A *run* is a batch of W elements along a grid row whose node numbers advance by one from lane
+// to lane (node a of lane w is node base_a + w): its gather is then W consecutive nodes per local
+// node, loaded as contiguous vectors, and its scatter adds W consecutive nodes, local node after
+// local node (lanes share nodes across local nodes, never within one). On meshes from label
+// volumes most batches are runs; this removes the scalar gather and scatter that dominated.
 #include "physreg/mechanics/materials/material.hpp"
 
 #include <cmath>
@@ -38,8 +44,8 @@ inline void inverse_cube_root(const Real* j, Real* r)
 }
 
 /// Adds the forces of elements[0..count) (count ≤ W) into f. Returns the index (into elements)
-/// of an element with det F ≤ 0, or -1.
-template <typename Real, int W, bool SharedGeometry>
+/// of an element with det F ≤ 0, or -1. Run = true: the elements form a run (see above).
+template <typename Real, int W, bool SharedGeometry, bool Run = false>
 inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBatchData& d, const Real* u,
                             const Real* dn_all, const Real* gamma_all, const Real* volume_all, const Real* vb2_all,
                             const Real* mu_all, const Real* lambda_all, const Real* kappa_all,
@@ -48,16 +54,42 @@ inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBa
     alignas(64) Real ux[8][W], uy[8][W], uz[8][W];
     alignas(64) Real bl[SharedGeometry ? 1 : 24][W], gl[SharedGeometry ? 1 : 32][W];
     alignas(64) Real vol[W], khg[W], mu[W], lambda[W], kappa[W];
-    std::int32_t ids[8][W];
-    for (int w = 0; w < W; ++w) {
-        const std::int32_t e = elements[w < count ? w : count - 1]; // idle lanes repeat the last element
-        const std::int32_t* c = d.connectivity + 8 * static_cast<std::size_t>(e);
+    std::int32_t ids[Run ? 1 : 8][W];
+    std::int32_t base[8];
+    if constexpr (Run) {
+        const std::int32_t* c0 = d.connectivity + 8 * static_cast<std::size_t>(elements[0]);
         for (int a = 0; a < 8; ++a) {
-            ids[a][w] = c[a];
-            const Real* ua = u + 3 * static_cast<std::size_t>(c[a]);
-            ux[a][w] = ua[0];
-            uy[a][w] = ua[1];
-            uz[a][w] = ua[2];
+            base[a] = c0[a];
+            const Real* ua = u + 3 * static_cast<std::size_t>(c0[a]);
+            if (count == W) {
+#pragma omp simd
+                for (int w = 0; w < W; ++w) {
+                    ux[a][w] = ua[3 * w];
+                    uy[a][w] = ua[3 * w + 1];
+                    uz[a][w] = ua[3 * w + 2];
+                }
+            } else { // a row's last, shorter run: idle lanes repeat its first element
+                for (int w = 0; w < W; ++w) {
+                    const int live = w < count ? w : 0;
+                    ux[a][w] = ua[3 * live];
+                    uy[a][w] = ua[3 * live + 1];
+                    uz[a][w] = ua[3 * live + 2];
+                }
+            }
+        }
+    }
+    for (int w = 0; w < W; ++w) {
+        // Idle lanes repeat an element of the batch (the last; a run's first, as gathered above).
+        const std::int32_t e = elements[w < count ? w : (Run ? 0 : count - 1)];
+        if constexpr (!Run) {
+            const std::int32_t* c = d.connectivity + 8 * static_cast<std::size_t>(e);
+            for (int a = 0; a < 8; ++a) {
+                ids[a][w] = c[a];
+                const Real* ua = u + 3 * static_cast<std::size_t>(c[a]);
+                ux[a][w] = ua[0];
+                uy[a][w] = ua[1];
+                uz[a][w] = ua[2];
+            }
         }
         const int g = SharedGeometry ? 0 : d.geometry[e];
         const int m = d.material[e];
@@ -192,13 +224,33 @@ inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBa
             fy[a][w] = y;
             fz[a][w] = z;
         }
-    for (int w = 0; w < count; ++w)
+    if constexpr (Run) {
         for (int a = 0; a < 8; ++a) {
-            Real* fa = f + 3 * static_cast<std::size_t>(ids[a][w]);
-            fa[0] += fx[a][w];
-            fa[1] += fy[a][w];
-            fa[2] += fz[a][w];
+            Real* fa = f + 3 * static_cast<std::size_t>(base[a]);
+            if (count == W) {
+#pragma omp simd
+                for (int w = 0; w < W; ++w) {
+                    fa[3 * w] += fx[a][w];
+                    fa[3 * w + 1] += fy[a][w];
+                    fa[3 * w + 2] += fz[a][w];
+                }
+            } else {
+                for (int w = 0; w < count; ++w) {
+                    fa[3 * w] += fx[a][w];
+                    fa[3 * w + 1] += fy[a][w];
+                    fa[3 * w + 2] += fz[a][w];
+                }
+            }
         }
+    } else {
+        for (int w = 0; w < count; ++w)
+            for (int a = 0; a < 8; ++a) {
+                Real* fa = f + 3 * static_cast<std::size_t>(ids[a][w]);
+                fa[0] += fx[a][w];
+                fa[1] += fy[a][w];
+                fa[2] += fz[a][w];
+            }
+    }
     return -1;
 }
 

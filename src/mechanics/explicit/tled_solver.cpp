@@ -138,6 +138,22 @@ TledSolver<Real>::TledSolver(const TledModel& model) : m_model(model), m_n(model
     m_prescribed.assign(dofs, 0);
     m_stiffness_bound = model.stiffness_bound();
     m_time_step = model.time_step_s();
+    // Runs: positions in the element order from which the next elements' nodes all advance by one
+    // (a grid row numbered along x). m_run_length[k] counts them, within k's chunk.
+    if (npe == 8) {
+        const auto& order = model.element_order();
+        const auto& conn = model.connectivity();
+        m_run_length.assign(order.size(), 1);
+        for (const auto& phase : model.phases())
+            for (const auto& chunk : phase)
+                for (std::int64_t k = chunk.end - 2; k >= chunk.begin; --k) {
+                    const std::int32_t* a = conn.data() + 8 * static_cast<std::size_t>(order[k]);
+                    const std::int32_t* b = conn.data() + 8 * static_cast<std::size_t>(order[k + 1]);
+                    bool shifted = true;
+                    for (int n = 0; n < 8; ++n) shifted = shifted && b[n] == a[n] + 1;
+                    if (shifted) m_run_length[k] = m_run_length[k + 1] + 1;
+                }
+    }
 }
 
 template <typename Real>
@@ -267,39 +283,61 @@ void TledSolver<Real>::forces_in_parallel_region(const Real* u, Real* f, bool ze
 #pragma omp for schedule(static)
         for (std::size_t i = 0; i < m_n; ++i) nodal[i] *= m_inverse_nodal_volume[i];
     }
-    for (const auto& phase : m_model.phases()) {
-        const long chunks = static_cast<long>(phase.size());
-#pragma omp for schedule(static)
-        for (long chunk = 0; chunk < chunks; ++chunk) {
-            const std::int64_t begin = phase[chunk].begin, end = phase[chunk].end;
-            if (npe == 8) {
-                constexpr int W = 16; // elements per SIMD batch: two AVX-512 registers of doubles (measured best of 8, 16, 32)
-                for (std::int64_t first = begin; first < end; first += W) {
-                    const int in_batch = static_cast<int>(std::min<std::int64_t>(W, end - first));
-                    const std::int32_t* elements = order + first;
-                    const int bad = shared_geometry
-                                        ? detail::hexahedron_batch<Real, W, true>(elements, in_batch, data, u, m_dn.data(), m_gamma.data(),
-                                                                                  m_volume.data(), m_vb2.data(), m_mu.data(), m_lambda.data(),
-                                                                                  m_kappa.data(), m_hourglass.data(), law, f)
-                                        : detail::hexahedron_batch<Real, W, false>(elements, in_batch, data, u, m_dn.data(), m_gamma.data(),
-                                                                                   m_volume.data(), m_vb2.data(), m_mu.data(), m_lambda.data(),
-                                                                                   m_kappa.data(), m_hourglass.data(), law, f);
-                    if (bad >= 0) inverted = std::min<long>(inverted, elements[bad]);
-                }
-            } else {
-                for (std::int64_t k = begin; k < end; ++k) {
-                    const std::int32_t e = order[k];
-                    const std::int32_t g = geometry[e];
-                    const std::uint16_t m = material[e];
-                    const std::int32_t* ids = connectivity + 4 * static_cast<std::size_t>(e);
-                    Real jbar = 0;
-                    if (anp) jbar = (m_nodal_j[ids[0]] + m_nodal_j[ids[1]] + m_nodal_j[ids[2]] + m_nodal_j[ids[3]]) / Real(4);
-                    const Real j = tetrahedron_forces<Real>(ids, u, m_dn.data() + 12 * g, m_volume[g], law, m_mu[m], m_lambda[m],
-                                                            m_kappa[m], f, jbar);
-                    if (!(j > Real(0))) inverted = std::min<long>(inverted, e);
-                }
+    auto run_chunk = [&](const TledModel::Chunk& chunk) {
+        const std::int64_t begin = chunk.begin, end = chunk.end;
+        if (npe == 8) {
+            constexpr int W = 16; // elements per SIMD batch: two AVX-512 registers of doubles (measured best of 8, 16, 32)
+            for (std::int64_t first = begin; first < end;) {
+                // A run of at least W/2 elements (see hexahedron_kernel.hpp) takes the contiguous
+                // path; other batches stop where such a run begins.
+                constexpr int shortest_run = W / 2;
+                const bool run = m_run_length[first] >= shortest_run;
+                int in_batch = static_cast<int>(std::min<std::int64_t>(W, end - first));
+                if (run)
+                    in_batch = std::min(in_batch, m_run_length[first]);
+                else
+                    for (int k = 1; k < in_batch; ++k)
+                        if (m_run_length[first + k] >= shortest_run) {
+                            in_batch = k;
+                            break;
+                        }
+                const std::int32_t* elements = order + first;
+                const Real* args[] = {m_dn.data(), m_gamma.data(), m_volume.data(), m_vb2.data(), m_mu.data(), m_lambda.data(), m_kappa.data(), m_hourglass.data()};
+                int bad;
+                if (shared_geometry)
+                    bad = run ? detail::hexahedron_batch<Real, W, true, true>(elements, in_batch, data, u, args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7], law, f)
+                              : detail::hexahedron_batch<Real, W, true, false>(elements, in_batch, data, u, args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7], law, f);
+                else
+                    bad = run ? detail::hexahedron_batch<Real, W, false, true>(elements, in_batch, data, u, args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7], law, f)
+                              : detail::hexahedron_batch<Real, W, false, false>(elements, in_batch, data, u, args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7], law, f);
+                if (bad >= 0) inverted = std::min<long>(inverted, elements[bad]);
+                first += in_batch;
+            }
+        } else {
+            for (std::int64_t k = begin; k < end; ++k) {
+                const std::int32_t e = order[k];
+                const std::int32_t g = geometry[e];
+                const std::uint16_t m = material[e];
+                const std::int32_t* ids = connectivity + 4 * static_cast<std::size_t>(e);
+                Real jbar = 0;
+                if (anp) jbar = (m_nodal_j[ids[0]] + m_nodal_j[ids[1]] + m_nodal_j[ids[2]] + m_nodal_j[ids[3]]) / Real(4);
+                const Real j = tetrahedron_forces<Real>(ids, u, m_dn.data() + 12 * g, m_volume[g], law, m_mu[m], m_lambda[m],
+                                                        m_kappa[m], f, jbar);
+                if (!(j > Real(0))) inverted = std::min<long>(inverted, e);
             }
         }
+    };
+    // Band chunks (about a layer of a grid mesh each) differ in size: dealt out one at a time.
+    // Colour chunks are many and equal: dealt out statically.
+    const bool dynamic = m_model.band_partition();
+    for (const auto& phase : m_model.phases()) {
+        const long chunks = static_cast<long>(phase.size());
+#pragma omp for schedule(dynamic) nowait
+        for (long chunk = 0; chunk < (dynamic ? chunks : 0); ++chunk)
+            run_chunk(phase[chunk]);
+#pragma omp for schedule(static)
+        for (long chunk = 0; chunk < (dynamic ? 0 : chunks); ++chunk)
+            run_chunk(phase[chunk]);
     }
     if (m_coupling) {
         // Element loops end with a barrier; the coupling scatters serially (fixed order).

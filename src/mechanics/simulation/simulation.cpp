@@ -54,6 +54,20 @@ void run(const SimulationCase& c, const TledModel& model, const Loads& loads, Si
         result.time_step_s = dt;
         return;
     }
+    if (c.device != Device::cpu) {
+        check_device(c, "simulate");
+        GpuTledSolver solver(model, c.device);
+        solver.set_loads(loads);
+        for (int frame = 1; frame <= c.frames; ++frame) {
+            const double until = c.duration_s * frame / c.frames;
+            solver.advance(until - solver.time_s(), [&](double, long step) {
+                if (progress) progress(solver.time_s() / c.duration_s, fmt::format("step {} ({}), t = {:.4g} s", step, to_string(c.device), solver.time_s()));
+            });
+            result.frames.push_back({solver.time_s(), loads.load_factor(solver.time_s()), solver.displacement_mm()});
+        }
+        result.steps = solver.steps();
+        return;
+    }
     TledSolver<Real> solver(model);
     solver.set_loads(loads);
     if (c.dynamic) {

@@ -154,7 +154,7 @@ SimulationCase read_case(const fs::path& path, const Reader& r)
     if (solver) {
         const std::string where = "solver";
         r.check_keys(solver,
-                     {"method", "mode", "precision", "duration_s", "ramp_time_s", "damping_per_s", "hourglass_kappa", "hourglass_modulus",
+                     {"method", "mode", "precision", "device", "duration_s", "ramp_time_s", "damping_per_s", "hourglass_kappa", "hourglass_modulus",
                       "averaged_nodal_pressure", "time_step_safety", "density_scale", "time_step_s", "load_steps",
                       "displacement_tolerance_mm", "residual_tolerance", "max_iterations", "linear", "tolerance",
                       "penetration_tolerance_mm", "max_load_cuts", "rayleigh_mass_per_s", "rayleigh_stiffness_s", "mass", "tangent",
@@ -223,6 +223,7 @@ SimulationCase read_case(const fs::path& path, const Reader& r)
             if (p != "single" && p != "double") fail("{}: solver.precision '{}' must be single or double", r.what, p);
             c.single_precision = p == "single";
         }
+        if (solver["device"]) c.device = parse_device(r.get<std::string>(solver["device"], "device", where));
         c.duration_s = r.number(solver, "duration_s", where, 0.0);
         c.ramp_time_s = r.number(solver, "ramp_time_s", where, 0.0);
         c.tled.damping_per_s = r.number(solver, "damping_per_s", where, c.tled.damping_per_s);
@@ -245,6 +246,7 @@ SimulationCase read_case(const fs::path& path, const Reader& r)
     }
     if (c.method == SimulationCase::Method::newton && c.single_precision)
         fail("{}: solver.precision single applies to relaxation and explicit; newton runs in double precision", r.what);
+    check_device(c, r.what);
     c.tled.validate();
     c.equilibrium.validate();
     if (c.dynamic && !(c.duration_s > 0)) fail("{}: a dynamic run needs solver.duration_s > 0", r.what);
@@ -315,6 +317,17 @@ SimulationCase read_case(const fs::path& path, const Reader& r)
 }
 
 } // namespace
+
+void check_device(const SimulationCase& c, const std::string& what)
+{
+    if (c.device == Device::cpu) return;
+    const std::string device = to_string(c.device);
+    if (c.method != SimulationCase::Method::explicit_dynamics)
+        fail("{}: device {} runs explicit dynamics only (solver.method: explicit), not {}", what, device, to_string(c.method));
+    if (c.single_precision) fail("{}: device {} runs in double precision (solver.precision: double)", what, device);
+    if (!c.indenters.empty()) fail("{}: device {} does not run tools (indenters); run this case on the cpu", what, device);
+    if (c.tetrahedra) fail("{}: device {} runs hexahedral meshes only (tetrahedra: false)", what, device);
+}
 
 SimulationCase read_simulation_case(const fs::path& path)
 {

@@ -158,6 +158,56 @@ TEST(MechanicsTled, ResultsAreIdenticalForRepeatedRunsAndThreadCounts)
     EXPECT_EQ(one, two); // bitwise: colour-ordered scatter and block-ordered sums
 }
 
+TEST(MechanicsTled, BandPartitionSharesNoNodeWithinAPhaseAndMatchesTheColouring)
+{
+    // 6 × 5 × 40 hexahedra: 41 node planes, enough bands for the band partition (issue 45).
+    const VolumeMesh mesh = block_mesh(6, 5, 40, 1.0);
+    const TledModel banded(mesh, one_tissue(3e3, 0.45), {});
+    ASSERT_TRUE(banded.band_partition());
+    ASSERT_EQ(banded.phases().size(), 2u);
+    // No node in two chunks of one phase; every element exactly once.
+    std::vector<int> seen(mesh.cell_count(), 0);
+    for (const auto& phase : banded.phases()) {
+        std::vector<int> owner(mesh.node_count(), -1);
+        for (std::size_t c = 0; c < phase.size(); ++c)
+            for (std::int64_t k = phase[c].begin; k < phase[c].end; ++k) {
+                const auto e = banded.element_order()[k];
+                ++seen[e];
+                for (auto n : mesh.cell(e)) {
+                    EXPECT_TRUE(owner[n] < 0 || owner[n] == static_cast<int>(c)) << "node " << n << " in two chunks";
+                    owner[n] = static_cast<int>(c);
+                }
+            }
+    }
+    for (int s : seen) ASSERT_EQ(s, 1);
+    TledOptions colouring_options;
+    colouring_options.work_partition = TledOptions::WorkPartition::colouring;
+    const TledModel coloured(mesh, one_tissue(3e3, 0.45), colouring_options);
+    EXPECT_FALSE(coloured.band_partition());
+    Loads loads;
+    loads.constraints.push_back({"base", nodes_at(mesh, 2, 0.0), {true, true, true}, Vec3::Zero()});
+    loads.constraints.push_back({"top", nodes_at(mesh, 2, 40.0), {true, false, true}, Vec3(0.5, 0, -1.5)});
+    loads.ramp_time_s = 0.02;
+    auto run = [&](const TledModel& model, int threads) {
+        omp_set_num_threads(threads);
+        TledSolver<double> solver(model);
+        solver.set_loads(loads);
+        solver.advance(0.01);
+        return solver.displacement_mm();
+    };
+    const int available = omp_get_max_threads();
+    const auto one = run(banded, 1), two = run(banded, 2), reference = run(coloured, 2);
+    omp_set_num_threads(available);
+    EXPECT_EQ(one, two); // bitwise for any thread count
+    double worst = 0.0, peak = 0.0;
+    for (std::size_t k = 0; k < one.size(); ++k) {
+        worst = std::max(worst, std::abs(one[k] - reference[k]));
+        peak = std::max(peak, std::abs(reference[k]));
+    }
+    EXPECT_GT(peak, 0.2);
+    EXPECT_LT(worst, 1e-10 * peak); // the same forces summed in another order
+}
+
 TEST(MechanicsTled, IndentationConvergesUnderMeshRefinement)
 {
     // A 24 × 24 × 12 mm block on a fixed base, a 6 mm sphere pressed 2 mm into the top centre.

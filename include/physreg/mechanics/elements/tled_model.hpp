@@ -36,6 +36,11 @@ struct TledOptions {
     /// pressure uses J̄, the mean over the element's nodes of the volume-weighted J of the elements
     /// around each node — relieves volumetric locking of linear tetrahedra at ν → 0.5.
     bool averaged_nodal_pressure = false;
+    /// How the force loop shares elements among threads (see TledModel::phases): `automatic` takes
+    /// bands of node numbers when the numbering is narrow enough, else a colouring; `colouring`
+    /// forces the colouring (benchmarks compare the two in one run).
+    enum class WorkPartition { automatic, colouring };
+    WorkPartition work_partition = WorkPartition::automatic;
     void validate() const;
 };
 
@@ -80,6 +85,9 @@ public:
     };
     const std::vector<std::vector<Chunk>>& phases() const { return m_phases; }
     const std::vector<std::int32_t>& element_order() const { return m_element_order; }
+    /// True when the chunks are bands of node numbers (two phases, a chunk about one layer of a
+    /// grid mesh; chunks differ in size), false for a colouring (chunks of 16 elements).
+    bool band_partition() const { return m_band_partition; }
     /// Σ of V_e / 4 over the tetrahedra around each node (averaged nodal pressure), mm³.
     const std::vector<double>& nodal_volume() const { return m_nodal_volume; }
     /// Nodes on the mesh boundary (candidates for contact).
@@ -111,6 +119,8 @@ private:
     std::vector<std::vector<Chunk>> m_phases;
     std::vector<std::int32_t> m_element_order;
     void build_work_partition(const VolumeMesh& mesh);
+    bool build_band_partition(const VolumeMesh& mesh);
+    bool m_band_partition = false;
     std::vector<std::int32_t> m_surface_nodes;
     std::vector<std::array<std::int32_t, 4>> m_surface_faces;
     double m_critical_dt = 0.0, m_diagonal = 0.0;

@@ -128,6 +128,9 @@ private:
     std::vector<Real> m_dn, m_gamma, m_volume, m_vb2, m_mu, m_lambda, m_kappa, m_hourglass;
     std::vector<Real> m_rest;
     std::vector<Real> m_nodal_j, m_inverse_nodal_volume; ///< averaged nodal pressure (tetrahedra)
+    /// Hexahedra: per position of the element order, the length of the run of elements from it
+    /// whose node numbers advance by one (the force kernel's contiguous path), within its chunk.
+    std::vector<std::int32_t> m_run_length;
     // State: displacement now and one step before, forces, scratch.
     std::vector<Real> m_u, m_u_prev, m_u_next, m_force, m_force_prev, m_external;
     std::vector<std::uint8_t> m_constrained; ///< 3 per node: 1 if the dof is prescribed

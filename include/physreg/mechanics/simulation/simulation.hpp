@@ -6,6 +6,7 @@
 #include "physreg/mechanics/implicit/backward_euler.hpp"
 #include "physreg/mechanics/implicit/newton_solver.hpp"
 #include "physreg/mechanics/node_selection.hpp"
+#include "physreg/mechanics/explicit/gpu_tled.hpp"
 #include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
 
@@ -25,6 +26,9 @@ struct SimulationCase {
     TledOptions tled;
     std::optional<double> time_step_s;   ///< explicit step; refused above the critical step
     bool single_precision = false;
+    /// Where explicit dynamics runs (`solver.device`, or `simulate --device`): the GPU path runs
+    /// explicit dynamics of hexahedra in double precision without tools (gpu_tled.hpp).
+    Device device = Device::cpu;
     /// How the case is solved: static equilibrium by dynamic relaxation or by Newton's method, or
     /// dynamics for duration_s, explicit (central differences) or implicit (backward Euler)
     /// (`solver.method`; the older `solver.mode` static/dynamic means relaxation/explicit).
@@ -61,6 +65,8 @@ struct SimulationCase {
 
 /// Reads and validates a case file. Throws Error naming the key and the reason.
 SimulationCase read_simulation_case(const std::filesystem::path& path);
+/// Throws Error (naming `what`) when the case asks a device for what it cannot run.
+void check_device(const SimulationCase& c, const std::string& what);
 std::string to_string(SimulationCase::Method method); ///< relaxation | newton | explicit
 
 struct SimulationFrame {
