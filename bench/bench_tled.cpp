@@ -42,8 +42,9 @@ const VolumeMesh& mesh_of(int which)
     return which == 0 ? small : large;
 }
 
-// range(2): the force loop's work partition, 0 automatic (bands of node numbers on these grid
-// meshes), 1 the colouring used before (issue 45 compares the two in one run).
+// range(2), the force loop (issue 45 compares them in one run): 0 the default (bands of node
+// numbers, contiguous runs, the box corner transform), 1 the colouring and general kernel used
+// before, 2 bands and runs with the general kernel.
 template <typename Real>
 void BM_TledSteps(benchmark::State& state)
 {
@@ -51,7 +52,8 @@ void BM_TledSteps(benchmark::State& state)
     const int threads = static_cast<int>(state.range(1));
     omp_set_num_threads(threads);
     TledOptions options;
-    options.work_partition = state.range(2) == 0 ? TledOptions::WorkPartition::automatic : TledOptions::WorkPartition::colouring;
+    options.work_partition = state.range(2) == 1 ? TledOptions::WorkPartition::colouring : TledOptions::WorkPartition::automatic;
+    options.box_elements = state.range(2) == 0;
     const TledModel model(mesh, tissues(), options);
     TledSolver<Real> solver(model);
     Loads loads;
@@ -73,6 +75,7 @@ void BM_TledSteps(benchmark::State& state)
     state.counters["elements"] = double(model.element_count());
     state.counters["threads"] = threads;
     state.counters["band_partition"] = model.band_partition() ? 1 : 0;
+    state.counters["box_elements"] = solver.box_elements() ? 1 : 0;
     state.counters["element_steps_per_s"] = benchmark::Counter(element_steps, benchmark::Counter::kIsIterationInvariantRate);
 }
 
@@ -131,8 +134,8 @@ void BM_Assembly(benchmark::State& state)
 }
 
 BENCHMARK(BM_Assembly)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_TEMPLATE(BM_TledSteps, double)->ArgsProduct({{0, 1}, {1, 2}, {0, 1}})->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_TEMPLATE(BM_TledSteps, float)->ArgsProduct({{0, 1}, {1, 2}, {0, 1}})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_TEMPLATE(BM_TledSteps, double)->ArgsProduct({{0, 1}, {1, 2}, {0, 1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_TEMPLATE(BM_TledSteps, float)->ArgsProduct({{0, 1}, {1, 2}, {0, 1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_IndentationEquilibrium)->Arg(2)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 // As the physreg program: idle OpenMP threads spin briefly (core/openmp_wait.hpp), unless
 // GOMP_SPINCOUNT or OMP_WAIT_POLICY is set (bench/shared_load.sh compares the policies).

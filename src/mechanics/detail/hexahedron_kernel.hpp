@@ -23,19 +23,26 @@ struct HexBatchData {
     const std::int32_t* connectivity;
     const std::uint16_t* material;
     const std::int32_t* geometry;
+    const double* box_m = nullptr; ///< box elements: M of b_a = M s_a (row-major 3×3, 1/mm)
 };
 
-// J^(-1/3) by Newton's iteration r ← r (4 − J r³)/3 from r = 1: quadratic convergence for
-// J ∈ (0.3, 3) in 7 steps; lanes outside (rare, extreme deformation) are redone with std::cbrt.
+// J^(-1/3) by Newton's iteration r ← r (4 − J r³)/3 from r = 1: quadratic convergence, 5 steps
+// reach double precision for J ∈ (0.8, 1.25) (tissue near incompressibility stays well inside);
+// the check is vectorised too, and only a batch with a lane outside (large volume change) redoes
+// those lanes with std::cbrt.
 template <typename Real, int W>
 inline void inverse_cube_root(const Real* j, Real* r)
 {
-#pragma omp simd
+    Real worst = 0;
+#pragma omp simd reduction(max : worst)
     for (int w = 0; w < W; ++w) {
         Real x = 1;
-        for (int it = 0; it < 7; ++it) x = x * (Real(4) - j[w] * x * x * x) * Real(1.0 / 3.0);
+        for (int it = 0; it < 5; ++it) x = x * (Real(4) - j[w] * x * x * x) * Real(1.0 / 3.0);
         r[w] = x;
+        const Real t = std::abs(j[w] * x * x * x - Real(1));
+        worst = std::max(worst, t == t ? t : Real(1)); // NaN: redo
     }
+    if (worst < Real(64) * std::numeric_limits<Real>::epsilon()) return;
     for (int w = 0; w < W; ++w) {
         const Real t = j[w] * r[w] * r[w] * r[w];
         if (!(std::abs(t - Real(1)) < Real(64) * std::numeric_limits<Real>::epsilon()) && j[w] > Real(0))
@@ -43,9 +50,48 @@ inline void inverse_cube_root(const Real* j, Real* r)
     }
 }
 
+// Box elements (every hexahedron of a uniform grid, turned or not): b_a = M s_a with s_a the
+// corner's signs (±1 per axis) and the hourglass vectors Γ = ± the four sign products s_x s_y,
+// s_y s_z, s_z s_x, s_x s_y s_z. An 8-point Walsh–Hadamard transform of the corner values then
+// gives, in 24 additions per component, all of Σ_a s_a u_a (hence F = I + G Mᵀ) and the four
+// hourglass amplitudes; its transpose maps the mode forces back to the corners. That replaces
+// 8 × 3 × 3 + 8 × 4 × 3 multiply-adds by 24 + 24 additions each way (issue 45).
+// Corners in the mesher's order (label_grid.cpp) → binary index (bit 0: +x, bit 1: +y, bit 2: +z).
+inline constexpr int box_corner_bit[8] = {0, 1, 3, 2, 4, 5, 7, 6};
+
+/// t[k] = Σ_a p_k(a) v[a], p_k(a) = Π over the set bits d of k of s_d(a) (s = +1 on the + side).
+template <typename Real, int W>
+inline void box_modes(const Real (&v)[8][W], Real (&t)[8][W])
+{
+#pragma omp simd
+    for (int w = 0; w < W; ++w) {
+        const Real a0 = v[0][w], a1 = v[1][w], a3 = v[2][w], a2 = v[3][w], a4 = v[4][w], a5 = v[5][w], a7 = v[6][w], a6 = v[7][w];
+        const Real b0 = a0 + a1, b1 = a1 - a0, b2 = a2 + a3, b3 = a3 - a2, b4 = a4 + a5, b5 = a5 - a4, b6 = a6 + a7, b7 = a7 - a6;
+        const Real c0 = b0 + b2, c1 = b1 + b3, c2 = b2 - b0, c3 = b3 - b1, c4 = b4 + b6, c5 = b5 + b7, c6 = b6 - b4, c7 = b7 - b5;
+        t[0][w] = c0 + c4; t[1][w] = c1 + c5; t[2][w] = c2 + c6; t[3][w] = c3 + c7;
+        t[4][w] = c4 - c0; t[5][w] = c5 - c1; t[6][w] = c6 - c2; t[7][w] = c7 - c3;
+    }
+}
+
+/// The transpose: v[a] = Σ_k p_k(a) t[k] (mode forces back to the corners).
+template <typename Real, int W>
+inline void box_corners(const Real (&t)[8][W], Real (&v)[8][W])
+{
+#pragma omp simd
+    for (int w = 0; w < W; ++w) {
+        const Real a0 = t[0][w], a1 = t[1][w], a2 = t[2][w], a3 = t[3][w], a4 = t[4][w], a5 = t[5][w], a6 = t[6][w], a7 = t[7][w];
+        const Real b0 = a0 - a1, b1 = a0 + a1, b2 = a2 - a3, b3 = a2 + a3, b4 = a4 - a5, b5 = a4 + a5, b6 = a6 - a7, b7 = a6 + a7;
+        const Real c0 = b0 - b2, c1 = b1 - b3, c2 = b0 + b2, c3 = b1 + b3, c4 = b4 - b6, c5 = b5 - b7, c6 = b4 + b6, c7 = b5 + b7;
+        v[0][w] = c0 - c4; v[1][w] = c1 - c5; v[3][w] = c2 - c6; v[2][w] = c3 - c7;
+        v[4][w] = c0 + c4; v[5][w] = c1 + c5; v[7][w] = c2 + c6; v[6][w] = c3 + c7;
+    }
+}
+
 /// Adds the forces of elements[0..count) (count ≤ W) into f. Returns the index (into elements)
-/// of an element with det F ≤ 0, or -1. Run = true: the elements form a run (see above).
-template <typename Real, int W, bool SharedGeometry, bool Run = false>
+/// of an element with det F ≤ 0, or -1. Run = true: the elements form a run (see above). Box =
+/// true (needs SharedGeometry): the shared geometry is a box with b_a = M s_a, M = d.box_m
+/// (row-major), and the transform above replaces the gradient and hourglass sums.
+template <typename Real, int W, bool SharedGeometry, bool Run = false, bool Box = false>
 inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBatchData& d, const Real* u,
                             const Real* dn_all, const Real* gamma_all, const Real* volume_all, const Real* vb2_all,
                             const Real* mu_all, const Real* lambda_all, const Real* kappa_all,
@@ -113,6 +159,23 @@ inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBa
     };
 
     alignas(64) Real F[9][W];
+    alignas(64) Real tx[Box ? 8 : 1][W], ty[Box ? 8 : 1][W], tz[Box ? 8 : 1][W];
+    Real box_m[9] = {};
+    if constexpr (Box) {
+        static_assert(SharedGeometry, "box elements share one geometry");
+        for (int k = 0; k < 9; ++k) box_m[k] = static_cast<Real>(d.box_m[k]);
+        box_modes<Real, W>(ux, tx);
+        box_modes<Real, W>(uy, ty);
+        box_modes<Real, W>(uz, tz);
+#pragma omp simd
+        for (int w = 0; w < W; ++w) {
+            // F_ij = δ_ij + Σ_k M_jk G_ik, G_ik = t_i[2^k] = Σ_a s_k(a) u_ai.
+            const Real g[3][3] = {{tx[1][w], tx[2][w], tx[4][w]}, {ty[1][w], ty[2][w], ty[4][w]}, {tz[1][w], tz[2][w], tz[4][w]}};
+            for (int i = 0; i < 3; ++i)
+                for (int j = 0; j < 3; ++j)
+                    F[3 * i + j][w] = Real(i == j) + box_m[3 * j] * g[i][0] + box_m[3 * j + 1] * g[i][1] + box_m[3 * j + 2] * g[i][2];
+        }
+    } else {
 #pragma omp simd
     for (int w = 0; w < W; ++w) {
         Real f0 = 1, f1 = 0, f2 = 0, f3 = 0, f4 = 1, f5 = 0, f6 = 0, f7 = 0, f8 = 1;
@@ -131,6 +194,7 @@ inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBa
         F[0][w] = f0; F[1][w] = f1; F[2][w] = f2;
         F[3][w] = f3; F[4][w] = f4; F[5][w] = f5;
         F[6][w] = f6; F[7][w] = f7; F[8][w] = f8;
+    }
     }
     alignas(64) Real J[W];
 #pragma omp simd
@@ -191,6 +255,30 @@ inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBa
             }
         }
     }
+    alignas(64) Real fx[8][W], fy[8][W], fz[8][W];
+    if constexpr (Box) {
+        // Mode forces: gradient modes (PM)_ik at 2^k, hourglass modes k_hg t_i at 3, 5, 6, 7 (Γ =
+        // ±p: the sign squares away), none at 0; then back to the corners.
+        alignas(64) Real ox[8][W], oy[8][W], oz[8][W];
+#pragma omp simd
+        for (int w = 0; w < W; ++w) {
+            Real (*o[3])[W] = {ox, oy, oz};
+            Real (*t[3])[W] = {tx, ty, tz};
+            for (int i = 0; i < 3; ++i) {
+                o[i][0][w] = 0;
+                o[i][1][w] = P[3 * i][w] * box_m[0] + P[3 * i + 1][w] * box_m[3] + P[3 * i + 2][w] * box_m[6];
+                o[i][2][w] = P[3 * i][w] * box_m[1] + P[3 * i + 1][w] * box_m[4] + P[3 * i + 2][w] * box_m[7];
+                o[i][4][w] = P[3 * i][w] * box_m[2] + P[3 * i + 1][w] * box_m[5] + P[3 * i + 2][w] * box_m[8];
+                o[i][3][w] = khg[w] * t[i][3][w];
+                o[i][5][w] = khg[w] * t[i][5][w];
+                o[i][6][w] = khg[w] * t[i][6][w];
+                o[i][7][w] = khg[w] * t[i][7][w];
+            }
+        }
+        box_corners<Real, W>(ox, fx);
+        box_corners<Real, W>(oy, fy);
+        box_corners<Real, W>(oz, fz);
+    } else {
     alignas(64) Real qx[4][W], qy[4][W], qz[4][W];
 #pragma omp simd
     for (int w = 0; w < W; ++w)
@@ -206,7 +294,6 @@ inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBa
             qy[m][w] = khg[w] * sy;
             qz[m][w] = khg[w] * sz;
         }
-    alignas(64) Real fx[8][W], fy[8][W], fz[8][W];
 #pragma omp simd
     for (int w = 0; w < W; ++w)
         for (int a = 0; a < 8; ++a) {
@@ -224,6 +311,7 @@ inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBa
             fy[a][w] = y;
             fz[a][w] = z;
         }
+    }
     if constexpr (Run) {
         for (int a = 0; a < 8; ++a) {
             Real* fa = f + 3 * static_cast<std::size_t>(base[a]);

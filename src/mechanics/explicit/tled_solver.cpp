@@ -138,6 +138,50 @@ TledSolver<Real>::TledSolver(const TledModel& model) : m_model(model), m_n(model
     m_prescribed.assign(dofs, 0);
     m_stiffness_bound = model.stiffness_bound();
     m_time_step = model.time_step_s();
+    // Box elements (hexahedron_kernel.hpp): one shared geometry with b_a = M s_a, s_a the corner
+    // signs of the mesher's corner order, and hourglass vectors ± the four sign products.
+    if (npe == 8 && model.geometries().size() == 1 && model.options().box_elements) {
+        const auto& g = model.geometries()[0];
+        static constexpr int sign[8][3] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1}, {-1, -1, 1}, {1, -1, 1}, {1, 1, 1}, {-1, 1, 1}};
+        double m[9] = {}, largest_b = 0.0;
+        for (int a = 0; a < 8; ++a)
+            for (int j = 0; j < 3; ++j) {
+                largest_b = std::max(largest_b, std::abs(g.dn_dx[3 * a + j]));
+                for (int k = 0; k < 3; ++k) m[3 * j + k] += g.dn_dx[3 * a + j] * sign[a][k] / 8.0; // Σ_a s_a s_aᵀ = 8 I
+            }
+        bool box = largest_b > 0;
+        for (int a = 0; a < 8 && box; ++a)
+            for (int j = 0; j < 3; ++j) {
+                const double fitted = m[3 * j] * sign[a][0] + m[3 * j + 1] * sign[a][1] + m[3 * j + 2] * sign[a][2];
+                box = box && std::abs(fitted - g.dn_dx[3 * a + j]) <= 1e-10 * largest_b;
+            }
+        // Each hourglass vector must be ± one of the sign products xy, yz, zx, xyz, each used once.
+        int used = 0;
+        for (int alpha = 0; alpha < 4 && box; ++alpha) {
+            bool matched = false;
+            for (int bits : {3, 5, 6, 7}) {
+                double sigma = 0.0;
+                bool same = true;
+                for (int a = 0; a < 8; ++a) {
+                    double p = 1.0;
+                    for (int d = 0; d < 3; ++d)
+                        if ((bits >> d) & 1) p *= sign[a][d];
+                    if (a == 0) sigma = g.gamma[4 * a + alpha] * p;
+                    same = same && std::abs(g.gamma[4 * a + alpha] - sigma * p) <= 1e-10;
+                }
+                if (same && std::abs(std::abs(sigma) - 1.0) <= 1e-10 && !(used & (1 << bits))) {
+                    used |= 1 << bits;
+                    matched = true;
+                    break;
+                }
+            }
+            box = matched;
+        }
+        if (box) {
+            m_box = true;
+            m_box_m.assign(m, m + 9);
+        }
+    }
     // Runs: positions in the element order from which the next elements' nodes all advance by one
     // (a grid row numbered along x). m_run_length[k] counts them, within k's chunk.
     if (npe == 8) {
@@ -152,6 +196,19 @@ TledSolver<Real>::TledSolver(const TledModel& model) : m_model(model), m_n(model
                     bool shifted = true;
                     for (int n = 0; n < 8; ++n) shifted = shifted && b[n] == a[n] + 1;
                     if (shifted) m_run_length[k] = m_run_length[k + 1] + 1;
+                }
+        // The batches the force loop will form (see forces_in_parallel_region): count their elements.
+        constexpr std::int32_t shortest_run = 8, width = 16;
+        for (const auto& phase : model.phases())
+            for (const auto& chunk : phase)
+                for (std::int64_t k = chunk.begin; k < chunk.end;) {
+                    if (m_run_length[k] >= shortest_run) {
+                        const std::int64_t taken = std::min<std::int64_t>({width, m_run_length[k], chunk.end - k});
+                        m_run_elements += static_cast<std::size_t>(taken);
+                        k += taken;
+                    } else {
+                        ++k;
+                    }
                 }
     }
 }
@@ -252,7 +309,7 @@ void TledSolver<Real>::forces_in_parallel_region(const Real* u, Real* f, bool ze
     const std::int32_t* geometry = m_model.element_geometry().data();
     const MaterialLaw law = m_model.options().law;
     const bool shared_geometry = m_model.geometries().size() == 1;
-    const detail::HexBatchData data{connectivity, material, geometry};
+    const detail::HexBatchData data{connectivity, material, geometry, m_box ? m_box_m.data() : nullptr};
     long inverted = LONG_MAX;
     if (zero_first) {
 #pragma omp for schedule(static)
@@ -304,7 +361,10 @@ void TledSolver<Real>::forces_in_parallel_region(const Real* u, Real* f, bool ze
                 const std::int32_t* elements = order + first;
                 const Real* args[] = {m_dn.data(), m_gamma.data(), m_volume.data(), m_vb2.data(), m_mu.data(), m_lambda.data(), m_kappa.data(), m_hourglass.data()};
                 int bad;
-                if (shared_geometry)
+                if (m_box)
+                    bad = run ? detail::hexahedron_batch<Real, W, true, true, true>(elements, in_batch, data, u, args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7], law, f)
+                              : detail::hexahedron_batch<Real, W, true, false, true>(elements, in_batch, data, u, args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7], law, f);
+                else if (shared_geometry)
                     bad = run ? detail::hexahedron_batch<Real, W, true, true>(elements, in_batch, data, u, args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7], law, f)
                               : detail::hexahedron_batch<Real, W, true, false>(elements, in_batch, data, u, args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7], law, f);
                 else
@@ -577,7 +637,6 @@ void TledSolver<Real>::advance(double duration_s, const ProgressCallback& progre
     const double dt = m_time_step;
     const long steps = static_cast<long>(std::ceil(duration_s / dt - 1e-9));
     const double alpha = m_model.options().damping_per_s;
-    const std::size_t dofs = 3 * m_n;
     // u⁺ = A (R − F) + B u − C u⁻ per node (central differences with mass-proportional damping).
     std::vector<Real> a(m_n), b(m_n), c(m_n);
     for (std::size_t i = 0; i < m_n; ++i) {
@@ -615,25 +674,35 @@ void TledSolver<Real>::advance(double duration_s, const ProgressCallback& progre
         forces_in_parallel_region(u, m_force.data(), step == 0);
         Real* f = m_force.data();
         const Real* r = m_external.data();
-        if (has_external) {
-#pragma omp for schedule(static) reduction(max : step_largest)
-            for (std::size_t k = 0; k < dofs; ++k) {
-                const std::size_t i = k / 3;
-                un[k] = a[i] * (s * r[k] - f[k]) + b[i] * u[k] - c[i] * up[k];
-                f[k] = 0;
-                const double magnitude = std::abs(double(un[k]));
-                step_largest = std::max(step_largest, magnitude != magnitude ? std::numeric_limits<double>::infinity() : magnitude);
+        // Node by node in blocks (vectorised over nodes); each thread keeps its largest |u⁺| and
+        // counts NaNs (+∞ then).
+        constexpr long nodes_per_block = static_cast<long>(BLOCK / 3);
+        const long nodes = static_cast<long>(m_n);
+        const long blocks = (nodes + nodes_per_block - 1) / nodes_per_block;
+        Real node_largest = 0;
+        int not_finite = 0;
+#pragma omp for schedule(static)
+        for (long block = 0; block < blocks; ++block) {
+            const long first = block * nodes_per_block, last = std::min(nodes, first + nodes_per_block);
+            Real block_largest = 0;
+            int block_nan = 0;
+#pragma omp simd reduction(max : block_largest) reduction(+ : block_nan)
+            for (long i = first; i < last; ++i) {
+                for (int d = 0; d < 3; ++d) {
+                    const long k = 3 * i + d;
+                    const Real load = has_external ? s * r[k] : Real(0);
+                    un[k] = a[i] * (load - f[k]) + b[i] * u[k] - c[i] * up[k];
+                    f[k] = 0;
+                    const Real magnitude = std::abs(un[k]);
+                    block_nan += magnitude != magnitude;
+                    block_largest = std::max(block_largest, magnitude);
+                }
             }
-        } else {
-#pragma omp for schedule(static) reduction(max : step_largest)
-            for (std::size_t k = 0; k < dofs; ++k) {
-                const std::size_t i = k / 3;
-                un[k] = b[i] * u[k] - c[i] * up[k] - a[i] * f[k];
-                f[k] = 0;
-                const double magnitude = std::abs(double(un[k]));
-                step_largest = std::max(step_largest, magnitude != magnitude ? std::numeric_limits<double>::infinity() : magnitude);
-            }
+            node_largest = std::max(node_largest, block_largest);
+            not_finite += block_nan;
         }
+#pragma omp critical(physreg_step_largest)
+        step_largest = std::max(step_largest, not_finite ? std::numeric_limits<double>::infinity() : double(node_largest));
         const double s_next = m_loads.load_factor(m_time + dt);
         const Real sn = static_cast<Real>(s_next);
         const long constrained = static_cast<long>(m_constrained_dofs.size());

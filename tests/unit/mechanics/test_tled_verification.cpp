@@ -158,10 +158,11 @@ TEST(MechanicsTled, ResultsAreIdenticalForRepeatedRunsAndThreadCounts)
     EXPECT_EQ(one, two); // bitwise: colour-ordered scatter and block-ordered sums
 }
 
-TEST(MechanicsTled, BandPartitionSharesNoNodeWithinAPhaseAndMatchesTheColouring)
+TEST(MechanicsTled, BandPartitionRunsAndBoxTransformMatchTheColouredGeneralKernel)
 {
-    // 6 × 5 × 40 hexahedra: 41 node planes, enough bands for the band partition (issue 45).
-    const VolumeMesh mesh = block_mesh(6, 5, 40, 1.0);
+    // 20 × 4 × 24 hexahedra: 25 node planes, enough bands for the band partition (issue 45), and
+    // rows of 20 elements: a run of 16 (the kernel's contiguous path) and 4 gathered one by one.
+    const VolumeMesh mesh = block_mesh(20, 4, 24, 1.0);
     const TledModel banded(mesh, one_tissue(3e3, 0.45), {});
     ASSERT_TRUE(banded.band_partition());
     ASSERT_EQ(banded.phases().size(), 2u);
@@ -182,11 +183,12 @@ TEST(MechanicsTled, BandPartitionSharesNoNodeWithinAPhaseAndMatchesTheColouring)
     for (int s : seen) ASSERT_EQ(s, 1);
     TledOptions colouring_options;
     colouring_options.work_partition = TledOptions::WorkPartition::colouring;
+    colouring_options.box_elements = false; // the general kernel: b and Γ multiplied out
     const TledModel coloured(mesh, one_tissue(3e3, 0.45), colouring_options);
     EXPECT_FALSE(coloured.band_partition());
     Loads loads;
     loads.constraints.push_back({"base", nodes_at(mesh, 2, 0.0), {true, true, true}, Vec3::Zero()});
-    loads.constraints.push_back({"top", nodes_at(mesh, 2, 40.0), {true, false, true}, Vec3(0.5, 0, -1.5)});
+    loads.constraints.push_back({"top", nodes_at(mesh, 2, 24.0), {true, false, true}, Vec3(0.5, 0, -1.0)});
     loads.ramp_time_s = 0.02;
     auto run = [&](const TledModel& model, int threads) {
         omp_set_num_threads(threads);
@@ -195,6 +197,13 @@ TEST(MechanicsTled, BandPartitionSharesNoNodeWithinAPhaseAndMatchesTheColouring)
         solver.advance(0.01);
         return solver.displacement_mm();
     };
+    // At least the 16 of every row (more where a chunk boundary cuts a row into two runs ≥ 8).
+    const std::size_t in_runs = TledSolver<double>(banded).run_elements();
+    EXPECT_GE(in_runs, 16u * 4 * 24);
+    EXPECT_LE(in_runs, mesh.cell_count());
+    EXPECT_EQ(TledSolver<double>(coloured).run_elements(), 0u);
+    EXPECT_TRUE(TledSolver<double>(banded).box_elements()); // the corner transform
+    EXPECT_FALSE(TledSolver<double>(coloured).box_elements());
     const int available = omp_get_max_threads();
     const auto one = run(banded, 1), two = run(banded, 2), reference = run(coloured, 2);
     omp_set_num_threads(available);
@@ -205,7 +214,7 @@ TEST(MechanicsTled, BandPartitionSharesNoNodeWithinAPhaseAndMatchesTheColouring)
         peak = std::max(peak, std::abs(reference[k]));
     }
     EXPECT_GT(peak, 0.2);
-    EXPECT_LT(worst, 1e-10 * peak); // the same forces summed in another order
+    EXPECT_LT(worst, 1e-10 * peak); // the same forces, other arithmetic and summation order
 }
 
 TEST(MechanicsTled, IndentationConvergesUnderMeshRefinement)

@@ -41,6 +41,9 @@ struct TledOptions {
     /// forces the colouring (benchmarks compare the two in one run).
     enum class WorkPartition { automatic, colouring };
     WorkPartition work_partition = WorkPartition::automatic;
+    /// Uniform grids of box hexahedra take the kernel's corner-transform path (the same forces with
+    /// fewer operations); false forces the general path (benchmarks compare the two).
+    bool box_elements = true;
     void validate() const;
 };
 

@@ -98,6 +98,11 @@ public:
     Energies energies() const;
     double time_s() const { return m_time; }
     long steps() const { return m_steps; }
+    /// Hexahedra: elements the force kernel takes as contiguous runs (grid rows numbered along x),
+    /// per force evaluation; the others are gathered node by node.
+    std::size_t run_elements() const { return m_run_elements; }
+    /// Hexahedra of one shared box geometry: forces by the corner transform (hexahedron_kernel.hpp).
+    bool box_elements() const { return m_box; }
     /// Nodes currently pushed out by an indenter.
     std::size_t contact_nodes() const { return m_contact_count; }
     /// Dynamic relaxation: surface-face samples that pressed into a tool at the last iteration
@@ -131,6 +136,10 @@ private:
     /// Hexahedra: per position of the element order, the length of the run of elements from it
     /// whose node numbers advance by one (the force kernel's contiguous path), within its chunk.
     std::vector<std::int32_t> m_run_length;
+    std::size_t m_run_elements = 0;
+    /// Box elements (one shared geometry b_a = M s_a): the kernel's Walsh–Hadamard path.
+    bool m_box = false;
+    std::vector<double> m_box_m;
     // State: displacement now and one step before, forces, scratch.
     std::vector<Real> m_u, m_u_prev, m_u_next, m_force, m_force_prev, m_external;
     std::vector<std::uint8_t> m_constrained; ///< 3 per node: 1 if the dof is prescribed
