@@ -9,7 +9,7 @@
 // of the later steps, split into force evaluation, assembly, factorisation and triangular solves.
 // Run: OMP_NUM_THREADS=2 OMP_WAIT_POLICY=passive build/bin/bench_backward_euler bench/results/bench_backward_euler.json
 //      [--mesh ../shared/data/sofa-mor-liverFine/liverFine.vtu] [--steps 100] [--young-pa 3500]
-//      [--tolerance 1e-4 (Newton policies: ‖r‖∞ ≤ tol × largest force)] [--hold-radius-mm 25]
+//      [--tolerance 1e-4 (Newton policies: ‖r‖∞ ≤ tol × largest force)] [--hold-radius-mm 25] [--policy N]
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/io/mesh_io.hpp"
 #include "physreg/mechanics/implicit/backward_euler.hpp"
@@ -50,6 +50,7 @@ int main(int argc, char** argv)
         std::filesystem::path mesh_path = "../shared/data/sofa-mor-liverFine/liverFine.vtu";
         int steps = 100;
         double young_pa = 3500, tolerance = 1e-4, radius = 25.0;
+        int only_policy = -1; // --policy N: run only the N-th policy (0: SOFA's linearised scheme)
         for (int i = 1; i < argc; ++i) {
             const std::string a = argv[i];
             if (a == "--mesh" && i + 1 < argc)
@@ -62,6 +63,8 @@ int main(int argc, char** argv)
                 tolerance = std::stod(argv[++i]);
             else if (a == "--hold-radius-mm" && i + 1 < argc)
                 radius = std::stod(argv[++i]);
+            else if (a == "--policy" && i + 1 < argc)
+                only_policy = std::stoi(argv[++i]);
             else
                 output = a;
         }
@@ -95,7 +98,9 @@ int main(int argc, char** argv)
             {"stale exact-tangent factor, Newton to tolerance", TangentUpdate::stale, 0, false},
             {"exact tangent every iteration, Newton to tolerance", TangentUpdate::every_iteration, 0, false}};
         nlohmann::json cases = nlohmann::json::array();
-        for (const auto& policy : policies) {
+        for (std::size_t p = 0; p < policies.size(); ++p) {
+            if (only_policy >= 0 && static_cast<std::size_t>(only_policy) != p) continue;
+            const Policy& policy = policies[p];
             BackwardEulerOptions be;
             be.time_step_s = 0.01;
             be.rayleigh_mass_per_s = 0.1;

@@ -5,6 +5,7 @@
 // the 74×18×54 block by dynamic relaxation.
 // Run: build/bin/bench_tled --benchmark_out=bench/results/bench_tled.json --benchmark_out_format=json
 #include "physreg/mechanics/implicit/stiffness_assembly.hpp"
+#include "physreg/mechanics/explicit/gpu_tled.hpp"
 #include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
 #include "physreg/core/openmp_wait.hpp"
@@ -79,6 +80,40 @@ void BM_TledSteps(benchmark::State& state)
     state.counters["element_steps_per_s"] = benchmark::Counter(element_steps, benchmark::Counter::kIsIterationInvariantRate);
 }
 
+// The GPU path on the same blocks and loads (double precision): skipped with the reason where this
+// build or machine has no CUDA device. Run in the same invocation as BM_TledSteps<double> for the
+// ratio (issue 45's target: ≥ 20× the 2-thread CPU path).
+void BM_TledStepsGpu(benchmark::State& state)
+{
+    const GpuStatus status = gpu_status();
+    if (!status.usable()) {
+        state.SkipWithError(("no GPU: " + status.reason).c_str());
+        return;
+    }
+    const VolumeMesh& mesh = mesh_of(static_cast<int>(state.range(0)));
+    const TledModel model(mesh, tissues(), {});
+    GpuTledSolver solver(model, Device::gpu);
+    Loads loads;
+    std::vector<std::int32_t> base, top;
+    double z_max = 0;
+    for (const auto& p : mesh.nodes) z_max = std::max(z_max, p[2]);
+    for (std::size_t n = 0; n < mesh.node_count(); ++n) {
+        if (mesh.nodes[n][2] < 1e-9) base.push_back(static_cast<std::int32_t>(n));
+        if (mesh.nodes[n][2] > z_max - 1e-9) top.push_back(static_cast<std::int32_t>(n));
+    }
+    loads.constraints.push_back({"base", base, {true, true, true}, Vec3::Zero()});
+    loads.constraints.push_back({"top", top, {false, false, true}, Vec3(0, 0, -5.0)});
+    loads.ramp_time_s = 0.1;
+    solver.set_loads(loads);
+    const double dt = model.time_step_s();
+    const long steps_per_iteration = 2000;
+    for (auto _ : state) solver.advance(steps_per_iteration * dt * (1 - 1e-6));
+    state.counters["elements"] = double(model.element_count());
+    state.SetLabel(status.device_name);
+    state.counters["element_steps_per_s"] =
+        benchmark::Counter(double(model.element_count()) * steps_per_iteration, benchmark::Counter::kIsIterationInvariantRate);
+}
+
 void BM_IndentationEquilibrium(benchmark::State& state)
 {
     omp_set_num_threads(static_cast<int>(state.range(0)));
@@ -136,6 +171,7 @@ void BM_Assembly(benchmark::State& state)
 BENCHMARK(BM_Assembly)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_TEMPLATE(BM_TledSteps, double)->ArgsProduct({{0, 1}, {1, 2}, {0, 1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_TEMPLATE(BM_TledSteps, float)->ArgsProduct({{0, 1}, {1, 2}, {0, 1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_TledStepsGpu)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_IndentationEquilibrium)->Arg(2)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 // As the physreg program: idle OpenMP threads spin briefly (core/openmp_wait.hpp), unless
 // GOMP_SPINCOUNT or OMP_WAIT_POLICY is set (bench/shared_load.sh compares the policies).

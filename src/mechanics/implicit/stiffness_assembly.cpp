@@ -4,6 +4,7 @@
 #include <omp.h>
 
 #include "physreg/core/error.hpp"
+#include "../detail/corotational_tetra_kernel.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -23,6 +24,16 @@ StiffnessAssembler::StiffnessAssembler(const TledModel& model, const PenaltyCoup
     const int npe = model.nodes_per_element();
     const std::size_t e_count = model.element_count();
     const auto& conn = model.connectivity();
+    if (npe == 4) {
+        for (const auto& g : model.geometries()) {
+            m_tetra_dn.insert(m_tetra_dn.end(), g.dn_dx.begin(), g.dn_dx.begin() + 12);
+            m_tetra_volume.push_back(g.volume_mm3);
+        }
+        for (const auto& m : model.materials()) {
+            m_tetra_mu.push_back(m.mu_mpa);
+            m_tetra_lambda.push_back(m.lambda_mpa);
+        }
+    }
 
     // Node adjacency: nodes sharing an element or a coupling support (the point's two MLS domains).
     std::vector<std::vector<std::int32_t>> adjacency(n);
@@ -169,10 +180,25 @@ Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* 
             for (std::int64_t k = 0; k < nnz; ++k) values[k] = 0.0;
         }
         std::int64_t my_inverted = -1, my_non_finite = -1, my_inverted_count = 0;
+        // Forces only, co-rotational tetrahedra: SIMD batches (corotational_tetra_kernel.hpp).
+        const bool tetra_batches = !values && npe == 4 && law == MaterialLaw::corotational;
         for (const auto& phase : m_model.phases()) {
             const long chunks = static_cast<long>(phase.size());
 #pragma omp for schedule(dynamic, 4)
-            for (long chunk = 0; chunk < chunks; ++chunk)
+            for (long chunk = 0; chunk < chunks; ++chunk) {
+                if (tetra_batches) {
+                    constexpr int W = 8;
+                    detail::TetraBatchResult batch;
+                    const detail::TetraBatchInput input{conn.data(), geometry_of.data(), material_of.data(), m_tetra_dn.data(),
+                                                        m_tetra_volume.data(), m_tetra_mu.data(), m_tetra_lambda.data()};
+                    for (std::int64_t first = phase[chunk].begin; first < phase[chunk].end; first += W) {
+                        const int count = static_cast<int>(std::min<std::int64_t>(W, phase[chunk].end - first));
+                        detail::corotational_tetra_batch<W>(order.data() + first, count, input, u, f, element_energy.data(), batch);
+                    }
+                    my_inverted_count += batch.inverted;
+                    if (batch.non_finite >= 0 && (my_non_finite < 0 || batch.non_finite < my_non_finite)) my_non_finite = batch.non_finite;
+                    continue;
+                }
                 for (std::int64_t slot = phase[chunk].begin; slot < phase[chunk].end; ++slot) {
                     const std::size_t e = static_cast<std::size_t>(order[slot]);
                     const ElementGeometry& g = m_model.geometries()[geometry_of[e]];
@@ -259,6 +285,7 @@ Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* 
                     if (!finite && (my_non_finite < 0 || static_cast<std::int64_t>(e) < my_non_finite))
                         my_non_finite = static_cast<std::int64_t>(e);
                 }
+            }
         }
 #pragma omp critical(physreg_assembly_flags)
         {

@@ -119,6 +119,10 @@ private:
     std::vector<const AuxiliaryElements*> m_auxiliary;
     StiffnessAssembler m_assembler;
     SparseMatrix m_mass, m_k, m_jacobian;
+    /// Lumped mass: the diagonal (3 per node), so that M v is a scaling, not a sparse product
+    /// over the stiffness pattern; empty for the consistent mass.
+    std::vector<double> m_mass_diagonal;
+    void mass_times(const Eigen::VectorXd& v, Eigen::VectorXd& out) const;
     SymmetricSolver m_linear;
     Loads m_loads;
     Vec3 m_gravity = Vec3::Zero();

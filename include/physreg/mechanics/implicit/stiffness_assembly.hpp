@@ -74,6 +74,8 @@ private:
     bool m_rotated_tangent = false;
     mutable ThreadGovernor m_governor; ///< one assembly is one unit of work (not thread-safe: one caller at a time)
     std::vector<double> m_hourglass_k;         ///< per material: κ_hg M / 8 (times V Σ|b|² per geometry)
+    /// Tetrahedra: b_a, volumes, μ and λ packed for the batched co-rotational force pass.
+    std::vector<double> m_tetra_dn, m_tetra_volume, m_tetra_mu, m_tetra_lambda;
 };
 
 } // namespace physreg
