@@ -43,6 +43,23 @@ const VolumeMesh& mesh_of(int which)
     return which == 0 ? small : large;
 }
 
+/// The explicit benchmarks' loads: base fixed, top pushed 5 mm down over a 0.1 s ramp.
+Loads base_fixed_top_pushed(const VolumeMesh& mesh)
+{
+    Loads loads;
+    std::vector<std::int32_t> base, top;
+    double z_max = 0;
+    for (const auto& p : mesh.nodes) z_max = std::max(z_max, p[2]);
+    for (std::size_t n = 0; n < mesh.node_count(); ++n) {
+        if (mesh.nodes[n][2] < 1e-9) base.push_back(static_cast<std::int32_t>(n));
+        if (mesh.nodes[n][2] > z_max - 1e-9) top.push_back(static_cast<std::int32_t>(n));
+    }
+    loads.constraints.push_back({"base", base, {true, true, true}, Vec3::Zero()});
+    loads.constraints.push_back({"top", top, {false, false, true}, Vec3(0, 0, -5.0)});
+    loads.ramp_time_s = 0.1;
+    return loads;
+}
+
 // range(2), the force loop (issue 45 compares them in one run): 0 the default (bands of node
 // numbers, contiguous runs, the box corner transform), 1 the colouring and general kernel used
 // before, 2 bands and runs with the general kernel.
@@ -57,17 +74,7 @@ void BM_TledSteps(benchmark::State& state)
     options.box_elements = state.range(2) == 0;
     const TledModel model(mesh, tissues(), options);
     TledSolver<Real> solver(model);
-    Loads loads;
-    std::vector<std::int32_t> base, top;
-    double z_max = 0;
-    for (const auto& p : mesh.nodes) z_max = std::max(z_max, p[2]);
-    for (std::size_t n = 0; n < mesh.node_count(); ++n) {
-        if (mesh.nodes[n][2] < 1e-9) base.push_back(static_cast<std::int32_t>(n));
-        if (mesh.nodes[n][2] > z_max - 1e-9) top.push_back(static_cast<std::int32_t>(n));
-    }
-    loads.constraints.push_back({"base", base, {true, true, true}, Vec3::Zero()});
-    loads.constraints.push_back({"top", top, {false, false, true}, Vec3(0, 0, -5.0)});
-    loads.ramp_time_s = 0.1;
+    const Loads loads = base_fixed_top_pushed(mesh);
     solver.set_loads(loads);
     const double dt = model.time_step_s();
     const long steps_per_iteration = 200;
@@ -93,17 +100,7 @@ void BM_TledStepsGpu(benchmark::State& state)
     const VolumeMesh& mesh = mesh_of(static_cast<int>(state.range(0)));
     const TledModel model(mesh, tissues(), {});
     GpuTledSolver solver(model, Device::gpu);
-    Loads loads;
-    std::vector<std::int32_t> base, top;
-    double z_max = 0;
-    for (const auto& p : mesh.nodes) z_max = std::max(z_max, p[2]);
-    for (std::size_t n = 0; n < mesh.node_count(); ++n) {
-        if (mesh.nodes[n][2] < 1e-9) base.push_back(static_cast<std::int32_t>(n));
-        if (mesh.nodes[n][2] > z_max - 1e-9) top.push_back(static_cast<std::int32_t>(n));
-    }
-    loads.constraints.push_back({"base", base, {true, true, true}, Vec3::Zero()});
-    loads.constraints.push_back({"top", top, {false, false, true}, Vec3(0, 0, -5.0)});
-    loads.ramp_time_s = 0.1;
+    const Loads loads = base_fixed_top_pushed(mesh);
     solver.set_loads(loads);
     const double dt = model.time_step_s();
     const long steps_per_iteration = 2000;
