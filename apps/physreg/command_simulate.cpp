@@ -11,6 +11,7 @@
 #include "physreg/field/displacement_sampling.hpp"
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/mesh_io.hpp"
+#include "physreg/mechanics/explicit/gpu_tled.hpp"
 #include "physreg/mechanics/simulation/simulation.hpp"
 
 #include <fstream>

@@ -3,6 +3,7 @@
 
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
+#include "physreg/mechanics/explicit/gpu_tled.hpp"
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/mesh_io.hpp"
 #include "physreg/mesh/hex_meshing.hpp"
@@ -112,16 +113,6 @@ void run(const SimulationCase& c, const TledModel& model, const Loads& loads, Si
 }
 
 } // namespace
-
-std::string to_string(SimulationCase::Method method)
-{
-    switch (method) {
-    case SimulationCase::Method::newton: return "newton";
-    case SimulationCase::Method::explicit_dynamics: return "explicit";
-    case SimulationCase::Method::backward_euler: return "backward-euler";
-    default: return "relaxation";
-    }
-}
 
 SimulationResult run_simulation(const SimulationCase& c, const std::function<void(double, const std::string&)>& progress)
 {

@@ -318,6 +318,16 @@ SimulationCase read_case(const fs::path& path, const Reader& r)
 
 } // namespace
 
+std::string to_string(SimulationCase::Method method)
+{
+    switch (method) {
+    case SimulationCase::Method::newton: return "newton";
+    case SimulationCase::Method::explicit_dynamics: return "explicit";
+    case SimulationCase::Method::backward_euler: return "backward-euler";
+    default: return "relaxation";
+    }
+}
+
 void check_device(const SimulationCase& c, const std::string& what)
 {
     if (c.device == Device::cpu) return;

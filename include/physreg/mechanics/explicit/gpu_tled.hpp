@@ -9,6 +9,7 @@
 // atomics; src/mechanics/explicit/gpu/tled_step_kernels.hpp). Scope: hexahedral meshes,
 // Neo-Hookean or St Venant–Kirchhoff, prescribed displacements and external forces, double
 // precision; tools (indenters) and tissue coupling stay on the CPU path (TledSolver).
+#include "physreg/mechanics/explicit/device.hpp"
 #include "physreg/mechanics/explicit/tled_solver.hpp"
 
 #include <memory>
@@ -16,10 +17,6 @@
 #include <vector>
 
 namespace physreg {
-
-enum class Device { cpu, gpu, gpu_emulation };
-Device parse_device(const std::string& text); ///< cpu | gpu | gpu-emulation; throws Error otherwise
-std::string to_string(Device device);
 
 /// What the GPU path can do on this machine.
 struct GpuStatus {

@@ -6,7 +6,7 @@
 #include "physreg/mechanics/implicit/backward_euler.hpp"
 #include "physreg/mechanics/implicit/newton_solver.hpp"
 #include "physreg/mechanics/node_selection.hpp"
-#include "physreg/mechanics/explicit/gpu_tled.hpp"
+#include "physreg/mechanics/explicit/device.hpp"
 #include "physreg/mechanics/explicit/tled_solver.hpp"
 #include "physreg/mesh/volume_mesh.hpp"
 

@@ -156,24 +156,6 @@ std::unique_ptr<GpuTledSolver::Backend> make_cuda_backend([[maybe_unused]] const
 
 } // namespace gpu
 
-Device parse_device(const std::string& text)
-{
-    if (text == "cpu") return Device::cpu;
-    if (text == "gpu") return Device::gpu;
-    if (text == "gpu-emulation") return Device::gpu_emulation;
-    fail("device '{}': expected cpu, gpu or gpu-emulation (the GPU algorithm run on the host, for checking)", text);
-}
-
-std::string to_string(Device device)
-{
-    switch (device) {
-    case Device::cpu: return "cpu";
-    case Device::gpu: return "gpu";
-    case Device::gpu_emulation: return "gpu-emulation";
-    }
-    return "?";
-}
-
 GpuStatus gpu_status()
 {
     GpuStatus status;
