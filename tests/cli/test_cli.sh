@@ -47,6 +47,15 @@ env -u OMP_WAIT_POLICY GOMP_SPINCOUNT=300000 OMP_DISPLAY_ENV=verbose "$physreg" 
 env -u GOMP_SPINCOUNT OMP_WAIT_POLICY=passive OMP_DISPLAY_ENV=verbose "$physreg" --version >/dev/null 2>"$work/err.txt" &&
   grep -q "OMP_WAIT_POLICY = 'PASSIVE'" "$work/err.txt" && ! grep -q "GOMP_SPINCOUNT = '1000'" "$work/err.txt" && pass ||
   failed "OMP_WAIT_POLICY=passive is kept without a spin count of ours"
+# OpenBLAS's generic kernels on a CPU it does not know (a VM masking the model) are replaced by ones
+# the CPU runs (core/blas_kernels.hpp); OPENBLAS_CORETYPE set by the user is kept. OPENBLAS_VERBOSE=2
+# prints "Core: NAME" at each load; no line: the BLAS is not OpenBLAS, nothing to check.
+core=$(env -u OPENBLAS_CORETYPE OPENBLAS_VERBOSE=2 "$physreg" --version 2>&1 | sed -n 's/^Core: //p' | tail -n 1)
+if [ -n "$core" ] && grep -qw avx2 /proc/cpuinfo && grep -qw fma /proc/cpuinfo; then
+  [ "$core" != Prescott ] && pass || failed "OpenBLAS kept its generic Prescott kernels on a CPU with AVX2 and FMA"
+  core=$(OPENBLAS_CORETYPE=Prescott OPENBLAS_VERBOSE=2 "$physreg" --version 2>&1 | sed -n 's/^Core: //p')
+  [ "$core" = Prescott ] && pass || failed "an OPENBLAS_CORETYPE the user set is kept (got '$core')"
+fi
 expect_ok "--help" "$physreg" --help
 for sub in mesh coarsen info convert demo phantom estimate register-compression register-surface register-images evaluate "landmarks locate" "enrich build" "enrich apply" "bench enrich" serve settings; do
   expect_ok "$sub --help" "$physreg" $sub --help
