@@ -11,6 +11,7 @@
 //      [--mesh ../shared/data/sofa-mor-liverFine/liverFine.vtu] [--steps 100] [--young-pa 3500]
 //      [--tolerance 1e-4 (Newton policies: ‖r‖∞ ≤ tol × largest force)] [--hold-radius-mm 25] [--policy N]
 #include "physreg/core/atomic_file.hpp"
+#include "physreg/core/blas_kernels.hpp"
 #include "physreg/io/mesh_io.hpp"
 #include "physreg/mechanics/implicit/backward_euler.hpp"
 
@@ -45,6 +46,7 @@ double percentile(std::vector<double> v, double p)
 
 int main(int argc, char** argv)
 {
+    physreg::restart_with_fast_blas_kernels(argv); // the program's own choice of BLAS kernels (core/blas_kernels.hpp)
     try {
         std::filesystem::path output = "bench_backward_euler.json";
         std::filesystem::path mesh_path = "../shared/data/sofa-mor-liverFine/liverFine.vtu";
@@ -181,6 +183,7 @@ int main(int argc, char** argv)
                                     {"scale_mm_per_unit", scale_mm},
                                     {"held_nodes", hold.nodes.size()},
                                     {"threads", omp_get_max_threads()},
+                                    {"openblas_kernels", physreg::openblas_kernels()},
                                     {"law", "corotational"},
                                     {"young_pa", young_pa},
                                     {"hold_radius_mm", radius},

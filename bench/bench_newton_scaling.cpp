@@ -7,6 +7,7 @@
 // Run: OMP_NUM_THREADS=2 build/bin/bench_newton_scaling bench/results/bench_newton_scaling.json
 //      [--max-elements N] [--budget-s S]   (a case predicted to take longer than S is skipped)
 #include "physreg/core/atomic_file.hpp"
+#include "physreg/core/blas_kernels.hpp"
 #include "physreg/figures/canvas.hpp"
 #include "physreg/io/png.hpp"
 #include "physreg/mechanics/implicit/newton_solver.hpp"
@@ -132,6 +133,7 @@ double slope(const std::vector<std::pair<double, double>>& points)
 
 int main(int argc, char** argv)
 {
+    physreg::restart_with_fast_blas_kernels(argv); // the program's own choice of BLAS kernels (core/blas_kernels.hpp)
     if (argc < 2) {
         std::cerr << "usage: bench_newton_scaling OUT.json [--max-elements N] [--budget-s S] [--methods a,b,...]\n";
         return 1;

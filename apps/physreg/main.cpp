@@ -7,9 +7,6 @@
 #include "physreg/core/interrupt.hpp"
 #include "physreg/core/openmp_wait.hpp"
 
-#include <unistd.h>
-
-#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <string>
@@ -17,27 +14,11 @@
 // Idle OpenMP threads spin briefly, then give the core back (core/openmp_wait.hpp; issue 30 item 5).
 PHYSREG_OPENMP_SHORT_SPIN();
 
-namespace {
-
-// OpenBLAS fell back to its generic kernels on a CPU it does not know (core/blas_kernels.hpp): start
-// again, the same process, with OPENBLAS_CORETYPE naming kernels this CPU runs (≈ 50 ms; the
-// supernodal factorisations then run about 4× faster). OPENBLAS_CORETYPE set by the user is kept,
-// and after the restart it is set, so this happens at most once.
-void restart_with_fast_blas_kernels(char** argv)
-{
-    if (std::getenv("OPENBLAS_CORETYPE")) return;
-    const std::string better = physreg::openblas_better_kernels();
-    if (better.empty()) return;
-    if (setenv("OPENBLAS_CORETYPE", better.c_str(), 1) != 0) return;
-    execv("/proc/self/exe", argv); // returns only on failure: go on with the generic kernels
-    unsetenv("OPENBLAS_CORETYPE");
-}
-
-} // namespace
-
 int main(int argc, char** argv)
 {
-    restart_with_fast_blas_kernels(argv);
+    // OpenBLAS's generic kernels on a CPU it does not know: start again with ones the CPU runs
+    // (the supernodal factorisations ≈ 4× faster; core/blas_kernels.hpp).
+    physreg::restart_with_fast_blas_kernels(argv);
     CLI::App app{"physreg — biomechanical volumetric registration for image-guided surgery.\n"
                  "Coordinates are physical mm in ITK's LPS space."};
     physreg::cli::build_app(app);

@@ -2,8 +2,10 @@
 #include "physreg/core/blas_kernels.hpp"
 
 #include <dlfcn.h>
+#include <unistd.h>
 
 #include <cctype>
+#include <cstdlib>
 
 namespace physreg {
 
@@ -28,6 +30,16 @@ std::string openblas_better_kernels()
         return "SkylakeX";
     if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) return "Haswell";
     return {};
+}
+
+void restart_with_fast_blas_kernels(char** argv)
+{
+    if (std::getenv("OPENBLAS_CORETYPE")) return;
+    const std::string better = openblas_better_kernels();
+    if (better.empty()) return;
+    if (setenv("OPENBLAS_CORETYPE", better.c_str(), 1) != 0) return;
+    execv("/proc/self/exe", argv); // returns only on failure: go on with the generic kernels
+    unsetenv("OPENBLAS_CORETYPE");
 }
 
 } // namespace physreg

@@ -20,4 +20,10 @@ std::string openblas_kernels();
 /// the CPU has neither, or the BLAS is not OpenBLAS.
 std::string openblas_better_kernels();
 
+/// For a program's main(), first thing: when openblas_better_kernels() names kernels and the user set
+/// no OPENBLAS_CORETYPE, executes the program again (the same process) with OPENBLAS_CORETYPE set —
+/// ≈ 50 ms. Returns when there is nothing to do, or when the restart failed (then with the generic
+/// kernels). After the restart the variable is set, so it happens at most once.
+void restart_with_fast_blas_kernels(char** argv);
+
 } // namespace physreg
