@@ -8,6 +8,7 @@
 #include "bindings.hpp"
 #include "progress.hpp"
 
+#include "physreg/core/blas_kernels.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/core/version.hpp"
 
@@ -27,6 +28,11 @@ PYBIND11_MODULE(_physreg, m)
 {
     m.doc() = "physreg: biomechanical volumetric registration (C++ core). Units: mm, Pa, N; LPS space.";
     m.attr("__version__") = physreg::VERSION;
+    m.def("openblas_kernels", &openblas_kernels,
+          "OpenBLAS's kernel set in this process ('SkylakeX', 'Haswell', 'Prescott', ...); '' when the BLAS is not OpenBLAS");
+    m.def("openblas_better_kernels", &openblas_better_kernels,
+          "The OPENBLAS_CORETYPE to start Python with when OpenBLAS fell back to its generic kernels on a CPU that runs "
+          "better ones (AVX-512: 'SkylakeX', AVX2: 'Haswell'); '' otherwise");
 
     static py::exception<Error> error(m, "Error", PyExc_RuntimeError);
     py::register_exception_translator([](std::exception_ptr p) {
