@@ -294,7 +294,11 @@ std::vector<SolvedState> solve_compressions(const GroundTruth& gt, const Phantom
 #pragma omp critical(phantom_progress)
         {
             ++finished;
-            solved_one(finished, compressions[static_cast<std::size_t>(c)].name);
+            try { // an exception must not leave the critical section (or the loop's body)
+                solved_one(finished, compressions[static_cast<std::size_t>(c)].name);
+            } catch (...) {
+                if (!failures[static_cast<std::size_t>(c)]) failures[static_cast<std::size_t>(c)] = std::current_exception();
+            }
         }
     }
     for (const auto& failure : failures)
@@ -395,8 +399,14 @@ DatasetReport generate_phantom_dataset(const PhantomSpec& spec, const fs::path& 
     std::vector<double> writing_s(compressions.size(), 0.0);
     double progress_now = prepared + 0.01;
     const auto report_in_turn = [&](double f, const std::string& m) {
+        std::exception_ptr error; // (a Python callback's KeyboardInterrupt): never thrown out of the critical section
 #pragma omp critical(phantom_progress)
-        report(std::max(f, progress_now), m);
+        try {
+            report(std::max(f, progress_now), m);
+        } catch (...) {
+            error = std::current_exception();
+        }
+        if (error) std::rethrow_exception(error);
     };
     const auto write_compression = [&](std::size_t k, const SolvedState& solved) {
         const auto start = std::chrono::steady_clock::now();
