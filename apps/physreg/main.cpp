@@ -17,7 +17,7 @@ PHYSREG_OPENMP_SHORT_SPIN();
 int main(int argc, char** argv)
 {
     // OpenBLAS's generic kernels on a CPU it does not know: start again with ones the CPU runs
-    // (the supernodal factorisations ≈ 4× faster; core/blas_kernels.hpp).
+    // (the supernodal factorisations ≈ 3× faster; core/blas_kernels.hpp).
     physreg::restart_with_fast_blas_kernels(argv);
     CLI::App app{"physreg — biomechanical volumetric registration for image-guided surgery.\n"
                  "Coordinates are physical mm in ITK's LPS space."};
