@@ -118,7 +118,8 @@ void bind_surface_pipeline(py::module_& m)
                                    "optionally targets with their truth.")
         .def(py::init([](const SurfaceModel& model, const py::array& points, std::optional<py::array> labels, std::optional<py::array> normals,
                          std::optional<std::map<std::string, std::array<double, 3>>> landmarks, std::optional<std::map<std::string, std::array<double, 3>>> truth,
-                         std::optional<std::vector<std::int32_t>> support_nodes, bool patient_frame) {
+                         std::optional<std::vector<std::int32_t>> support_nodes, bool patient_frame,
+                         std::optional<std::vector<std::int32_t>> load_nodes) {
                  PartialSurfaceCase c;
                  c.patient_frame = patient_frame;
                  c.mesh = model.mesh;
@@ -132,14 +133,19 @@ void bind_surface_pipeline(py::module_& m)
                      c.support_nodes = *support_nodes;
                      c.support_nodes_source = "support_nodes";
                  }
+                 if (load_nodes) {
+                     c.load_nodes = *load_nodes;
+                     c.load_nodes_source = "load_nodes";
+                 }
                  c.description = {{"source", "Python arrays"}};
                  return c;
              }),
              py::arg("model"), py::arg("points"), py::arg("labels") = py::none(), py::arg("normals") = py::none(), py::arg("landmarks") = py::none(),
-             py::arg("truth") = py::none(), py::arg("support_nodes") = py::none(), py::arg("patient_frame") = false,
+             py::arg("truth") = py::none(), py::arg("support_nodes") = py::none(), py::arg("patient_frame") = false, py::arg("load_nodes") = py::none(),
              "A SurfaceModel and a cloud (points (N, 3) mm LPS, int32 region labels (N,), normals (N, 3)); landmarks {name: (x, y, z)} at rest "
              "and their truth; support_nodes: node ids held besides the settings' support; patient_frame: the coordinates are a patient's "
-             "LPS frame (then support 'auto' offers the posterior surface).")
+             "LPS frame (then support 'auto' offers the posterior surface); load_nodes: surface node ids where forces may act (the tool's contact "
+             "region; the settings' load_nodes, load_points and tool_path add to it).")
         .def_static("from_dataset", [](const std::filesystem::path& dataset, const std::string& state, std::optional<int> visible,
                                        std::optional<py::dict> settings, const py::kwargs& overrides) {
             const auto s = settings_from(partial_surface_spec(), settings, overrides, "PartialSurfaceCase.from_dataset");

@@ -12,44 +12,13 @@
 #include "physreg/io/dataset.hpp"
 #include "physreg/io/image_io.hpp"
 #include "physreg/io/landmarks_io.hpp"
+#include "physreg/io/point_path.hpp"
 #include "physreg/registration/prepared_model.hpp"
 
 #include <chrono>
 #include <iostream>
-#include <sstream>
 
 namespace physreg::cli {
-namespace {
-
-/// "x,y,z;x,y,z;…" (mm, LPS) → the path's points; throws Error naming the option.
-std::vector<Vec3> parse_tool_path(const std::string& text)
-{
-    std::vector<Vec3> path;
-    std::stringstream points(text);
-    std::string point;
-    while (std::getline(points, point, ';')) {
-        std::stringstream values(point);
-        std::string v;
-        std::vector<double> xyz;
-        while (std::getline(values, v, ',')) {
-            try {
-                std::size_t used = 0;
-                xyz.push_back(std::stod(v, &used));
-                if (used != v.size()) throw std::invalid_argument(v);
-            } catch (const std::exception&) {
-                fail("--tool-path '{}': '{}' is not a number", text, v);
-            }
-        }
-        if (xyz.size() != 3) fail("--tool-path '{}': each point is x,y,z in mm (got '{}')", text, point);
-        const Vec3 p(xyz[0], xyz[1], xyz[2]);
-        if (!p.allFinite()) fail("--tool-path '{}': a coordinate is not finite", text);
-        path.push_back(p);
-    }
-    if (path.empty()) fail("--tool-path '{}': no point", text);
-    return path;
-}
-
-} // namespace
 
 void add_subcommand_prepare(CLI::App& app)
 {
@@ -106,7 +75,7 @@ void add_subcommand_prepare(CLI::App& app)
                 t.name = "tool_" + std::to_string(tools.size() + 1);
                 t.shape = IndenterShape::sphere;
                 t.radius_mm = o->tool_radius;
-                t.path = parse_tool_path(text);
+                t.path = parse_point_path(text, "--tool-path");
                 tools.push_back(std::move(t));
             }
         }

@@ -47,7 +47,8 @@ def test_summary_tre_equals_tre_recomputed_from_the_written_landmarks(dataset, t
 def test_register_surface_reports_tre_and_hausdorff(dataset, tmp_path):
     summary = physreg.register_surface(tmp_path / "rs", dataset=dataset, visible=50, cell_size=10,
                                        max_steps_per_plateau=20, quiet=True)
-    assert set(summary["methods"]) == {"at_rest", "biomechanical", "rigid", "icp"}
+    assert set(summary["methods"]) == {"at_rest", "biomechanical", "adjoint", "rigid", "icp"}
+    assert summary["method"] == "adjoint"
     text = json.dumps(summary).lower()
     assert "hausdorff" in text and "tre" in text
     mesh = physreg.read_mesh(tmp_path / "rs" / "mesh.vtu")

@@ -43,9 +43,10 @@ def test_a_cloud_in_memory_registers_as_the_same_cloud_through_files(model_and_c
     # The model moved toward the cloud: the pushed nodes moved +y, by up to about the push.
     assert 1.0 < u[:, 1].max() < 6.0
 
-    # register_surface_cloud holds the posterior surface (its own default); the command is told the same
+    # register_surface_cloud (the biomechanical method) holds the posterior surface (its own default); the command is told the same
     # (its default, auto, offers posterior only in a patient frame, and a bare .vtu is none).
-    summary = physreg.register_surface(folder / "files", model=folder / "model.vtu", cloud=folder / "cloud.csv", support="posterior", quiet=True)
+    summary = physreg.register_surface(folder / "files", model=folder / "model.vtu", cloud=folder / "cloud.csv", support="posterior",
+                                       method="biomechanical", quiet=True)
     assert summary["methods"]["biomechanical"]["time_steps"] == result.steps
     field_file, geometry = physreg.read_displacement_field(folder / "files" / "displacement.nii.gz")
     field_memory, same_geometry = result.field(geometry)

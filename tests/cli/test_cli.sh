@@ -360,10 +360,63 @@ assert a["tre"]["internal"]["mean_mm"] < 0.7 * m["at_rest"]["tre"]["internal"]["
 assert a["rungs"] and a["chosen_alpha_mm2_per_mj"] == a["rungs"][-1]["alpha_mm2_per_mj"] and "discrepancy" in a["alpha_rule"]
 assert all(r1["alpha_mm2_per_mj"] < r0["alpha_mm2_per_mj"] for r0, r1 in zip(a["rungs"], a["rungs"][1:]))
 PY
-expect_error "register-surface: adjoint with elastic supports" "the adjoint method holds its supports" "$physreg" $rs --dataset "$work/push" --state push \
-  --method adjoint --support-stiffness 1 -o "$work/rs_bad16"
-expect_error "register-surface: zero noise" "--noise 0 mm must be > 0" "$physreg" $rs --dataset "$work/push" --state push --method adjoint --noise 0 -o "$work/rs_bad17"
 printf '# far from the liver\nname,x,y,z\nfar,900,900,900\n' > "$work/far_support.csv"
+printf 'node\n0\n99999999\n' > "$work/bad_nodes.txt"
+# The default method is the adjoint (issue 56); elastic supports tie the named nodes by springs there too.
+python3 - "$work/rs_push/summary.json" <<'PY' && pass || failed "register-surface defaults: the adjoint answers, never worse than at rest, the safeguard names its runner-up"
+import json, sys
+s = json.load(open(sys.argv[1]))
+m, g = s["methods"], s["safeguard"]
+assert s["method"] == "adjoint" and "adjoint" in m, s["method"]
+assert m[g["answer"]]["tre"]["internal"]["mean_mm"] <= m["at_rest"]["tre"]["internal"]["mean_mm"], (g, m[g["answer"]]["tre"])
+assert g["runner_up"] in m and g["runner_up"] != g["answer"] and isinstance(g["margin_mm"], float), g
+assert s["load_region"]["nodes"] == [], s["load_region"]
+PY
+printf 'node\n0\n' > "$work/node0.txt"
+expect_ok "register-surface --method adjoint with elastic supports" "$physreg" --no-report $rs --dataset "$work/push" --state push --method adjoint \
+  --support none --support-nodes "$work/node0.txt" --support-stiffness 1 --uncertainty none -o "$work/rs_adjoint_elastic"
+python3 -c "import json,sys; s=json.load(open(sys.argv[1])); assert s['supports']['kind']=='elastic' and s['safeguard']['requested']=='adjoint'" \
+  "$work/rs_adjoint_elastic/summary.json" && pass || failed "register-surface --method adjoint: elastic supports recorded"
+# Where the tool pressed (issue 56 item 2): node ids, points with a radius, or a tracked tool's path.
+"$physreg" --log-level warn convert "$work/rs_push/mesh.vtu" "$work/rs_push_mesh.v2.msh" >/dev/null
+python3 - "$work/rs_push_mesh.v2.msh" "$work/surface_node.txt" "$work/interior_node.txt" "$work/tool_path.txt" <<'PY'
+import sys
+lines = open(sys.argv[1]).read().split("\n")
+i = lines.index("$Nodes")
+pts = [list(map(float, l.split()[1:4])) for l in lines[i + 2:i + 2 + int(lines[i + 1])]]
+j = lines.index("$Elements")
+faces = {}
+for l in lines[j + 2:j + 2 + int(lines[j + 1])]:
+    w = list(map(int, l.split()))
+    if w[1] != 4:
+        continue
+    t = [v - 1 for v in w[3 + w[2]:]]
+    for f in ((t[0], t[1], t[2]), (t[0], t[1], t[3]), (t[0], t[2], t[3]), (t[1], t[2], t[3])):
+        k = tuple(sorted(f)); faces[k] = faces.get(k, 0) + 1
+surface = sorted({v for f, n in faces.items() if n == 1 for v in f})
+interior = sorted(set(range(len(pts))) - set(surface))
+n = surface[len(surface) // 2]
+open(sys.argv[2], "w").write("%d\n" % n)
+open(sys.argv[3], "w").write("%d\n" % interior[0])
+open(sys.argv[4], "w").write("%.3f,%.3f,%.3f" % tuple(pts[n]))
+PY
+expect_ok "register-surface --tool-path with --tool-radius" "$physreg" --no-report $rs --dataset "$work/push" --state push \
+  --tool-path "$(cat "$work/tool_path.txt")" --tool-radius 12 --uncertainty none -o "$work/rs_tool"
+python3 -c "import json,sys; r=json.load(open(sys.argv[1]))['load_region']; assert len(r['nodes'])>1 and r['sources'][0]['source']=='tool path', r" \
+  "$work/rs_tool/summary.json" && pass || failed "register-surface --tool-path: the load region in the summary"
+expect_error "register-surface: load node out of range" "is not a node of the model" "$physreg" $rs --dataset "$work/push" --state push \
+  --load-nodes "$work/bad_nodes.txt" -o "$work/rs_bad16"
+expect_error "register-surface: load node inside the model" "is not on the model's surface" "$physreg" $rs --dataset "$work/push" --state push \
+  --load-nodes "$work/interior_node.txt" -o "$work/rs_bad18"
+expect_error "register-surface: load points off the model" "no surface node within --load-radius" "$physreg" $rs --dataset "$work/push" --state push \
+  --load-points "$work/far_support.csv" -o "$work/rs_bad19"
+expect_error "register-surface: tool path with NaN" "a coordinate is not finite" "$physreg" $rs --dataset "$work/push" --state push \
+  --tool-path "1,2,nan" --tool-radius 5 -o "$work/rs_bad20"
+expect_error "register-surface: tool path without radius" "--tool-path needs --tool-radius > 0" "$physreg" $rs --dataset "$work/push" --state push \
+  --tool-path "1,2,3" -o "$work/rs_bad21"
+expect_error "register-surface: tool path off the model" "no surface node of the model lies within --tool-radius" "$physreg" $rs --dataset "$work/push" \
+  --state push --tool-path "900,900,900;901,900,900" --tool-radius 5 -o "$work/rs_bad22"
+expect_error "register-surface: zero noise" "--noise 0 mm must be > 0" "$physreg" $rs --dataset "$work/push" --state push --method adjoint --noise 0 -o "$work/rs_bad17"
 expect_error "register-surface: support points off the model" "no surface node within --support-radius" "$physreg" $rs --dataset "$work/push" \
   --state push --support-points "$work/far_support.csv" -o "$work/rs_bad10"
 printf 'node\n0\n99999999\n' > "$work/bad_nodes.txt"
@@ -402,7 +455,7 @@ assert [src["source"] for src in s["supports"]["sources"]] == ["region 3"] and s
 PY
 expect_error "register-surface: support region absent" "no surface triangle of the model carries that region label" "$physreg" $rs \
   --model "$work/rs_push/mesh.vtu" --regions "$work/regions_back.vtk" --cloud "$push_cloud" --support-region 7 -o "$work/rs_bad15"
-for d in rs_bad10 rs_bad11 rs_bad12 rs_bad13 rs_bad14 rs_bad15 rs_bad16 rs_bad17; do expect_no_file "$work/$d"; done
+for d in rs_bad10 rs_bad11 rs_bad12 rs_bad13 rs_bad14 rs_bad15 rs_bad16 rs_bad17 rs_bad18 rs_bad19 rs_bad20 rs_bad21 rs_bad22; do expect_no_file "$work/$d"; done
 
 # physreg register-images (paper 002) on the small phantom's insufflation pair: the biomechanical
 # method with label baselines, then bad inputs (each: clear message, non-zero exit, no output).

@@ -107,12 +107,26 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
     // forces fold an element (issue 46: numerical trouble backs the method off, it never ends the run).
     std::vector<double> last_good(n, 0.0);
     // Elastic supports: springs to rest at the support nodes (a Form, mechanics/forms).
+    // Where pair forces may act (the tool's contact region); 1 everywhere without one.
+    std::vector<std::uint8_t> may_load(model.node_count(), options.load_nodes.empty() ? 1 : 0);
+    for (const auto node : options.load_nodes) {
+        if (node < 0 || static_cast<std::size_t>(node) >= model.node_count()) fail("surface registration: load node {} is not a model node", node);
+        may_load[static_cast<std::size_t>(node)] = 1;
+    }
     const SpringForm elastic_supports(model.node_count(), options.support_stiffness_n_per_mm > 0 ? options.fixed_nodes : std::vector<std::int32_t>{},
                                       options.support_stiffness_n_per_mm);
+    // Issue 56 item 5: a step whose pair forces fold an element is undone and retried with the pairs
+    // softened by half (up to max_backoffs times in a plateau); the softening is relaxed by half at
+    // each later plateau, so the annealing goes on instead of ending at the first inversion.
+    double softening = 1.0;
+    constexpr int max_backoffs = 6;
+    std::map<std::int32_t, double> applied;
     for (int plateau = 0; plateau < plateaus && result.stopped.empty(); ++plateau) {
         const auto plateau_start = std::chrono::steady_clock::now();
         PlateauReport report;
         report.plateau = plateau;
+        softening = std::min(1.0, 2.0 * softening);
+        int backoffs = 0;
         for (const auto& [label, s] : options.schedules) report.stiffness_n[label] = s.stiffness(plateau);
         const int factorisations_before = integrator.total_factorisations();
         if (options.newton_iterations_per_step > 0) integrator.refresh_tangent();
@@ -128,7 +142,11 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
                      plateau, report.matching.pruned_far, report.matching.points, options.matching.max_distance_mm);
             std::fill(forces.begin(), forces.end(), 0.0);
             std::fill(stiffness.begin(), stiffness.end(), 0.0);
-            accumulate_pair_forces(pairs, matcher.source(), report.stiffness_n, options.force, forces, &stiffness);
+            for (const auto& [label, k] : report.stiffness_n) applied[label] = softening * k;
+            accumulate_pair_forces(pairs, matcher.source(), applied, options.force, forces, &stiffness);
+            if (!options.load_nodes.empty())
+                for (std::size_t i = 0; i < n; ++i)
+                    if (!may_load[i / 3]) forces[i] = stiffness[i] = 0.0;
             const bool elastic_support = options.support_stiffness_n_per_mm > 0;
             if (elastic_support) elastic_supports.add_restoring(u, forces, stiffness);
             Loads loads;
@@ -139,13 +157,30 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
             integrator.set_loads(std::move(loads));
             integrator.set_external_stiffness(stiffness);
             previous = u;
-            const BackwardEulerStep s = integrator.step();
-            if (s.inverted_elements > 0) {
+            BackwardEulerStep s;
+            std::string failure;
+            try {
+                s = integrator.step();
+            } catch (const Error& e) {
+                failure = e.what(); // a step that cannot be solved under these forces: backed off like an inversion
+            }
+            if (!failure.empty() || s.inverted_elements > 0) {
+                if (backoffs < max_backoffs) {
+                    integrator.set_state(previous, std::vector<double>(n, 0.0));
+                    integrator.refresh_tangent();
+                    softening *= 0.5;
+                    ++backoffs;
+                    ++result.backoffs;
+                    logger()->debug("surface registration: plateau {}: {}; the step is retried with the pairs softened to {:.3g} of their stiffness",
+                                    plateau + 1, failure.empty() ? fmt::format("{} element(s) inverted", s.inverted_elements) : failure, softening);
+                    continue;
+                }
                 result.inverted_elements = s.inverted_elements;
-                result.stopped = fmt::format("{} element(s) of the model inverted at plateau {} of {} (stiffness {:.3g} N, step {}): the forces are too "
-                                             "strong for this material there; the annealing stopped and the result of {} is kept (lower the traction "
-                                             "ratio or raise d90 to go further)",
-                                             s.inverted_elements, plateau + 1, plateaus, report.stiffness_n.begin()->second, report.steps + 1,
+                result.stopped = fmt::format("{} at plateau {} of {} (stiffness {:.3g} N, step {}) even with the pairs softened to {:.3g} of their "
+                                             "stiffness: the annealing stopped and the result of {} is kept (lower the traction ratio or raise d90 "
+                                             "to go further)",
+                                             failure.empty() ? fmt::format("{} element(s) of the model inverted", s.inverted_elements) : failure,
+                                             plateau + 1, plateaus, report.stiffness_n.begin()->second, report.steps + 1, softening,
                                              plateau == 0 ? std::string("the rest state") : fmt::format("plateau {}", plateau));
                 logger()->warn("surface registration: {}", result.stopped);
                 break;
@@ -189,6 +224,7 @@ SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model,
     pairs = matcher.match(x, cloud, options.matching);
     mark_used(pairs, matcher.source(), result.node_used);
     result.factorisations = integrator.total_factorisations();
+    result.final_softening = softening;
     result.seconds = seconds_since(start);
     return result;
 }
@@ -362,7 +398,13 @@ RobustRigidResult register_surface_rigid_robust(const std::vector<double>& rest,
         try {
             c.result = register_surface_rigid(rest, matcher, cloud, matching, use_labels, settings);
         } catch (const Error& e) {
-            if (name == "identity") throw; // the plain fit failing is the caller's error
+            // The plain fit failing where the cloud meets no part of the model at rest is the
+            // caller's error (a cloud in another space); a start that drifts off the cloud on the way
+            // (neohookean/s4 frame 0 of the adjoint-liver) is only a start that failed.
+            if (name == "identity") {
+                std::vector<double> at_rest = rest;
+                if (matcher.match(at_rest, cloud, matching).size() < 3) throw;
+            }
             logger()->debug("robust rigid: start {} failed: {}", name, e.what());
             continue;
         }
@@ -376,18 +418,21 @@ RobustRigidResult register_surface_rigid_robust(const std::vector<double>& rest,
         c.plausible = c.support_motion_mm <= options.support_tolerance_mm;
         out.candidates.push_back(std::move(c));
     }
-    const RigidCandidate& identity = out.candidates.front();
+    if (out.candidates.empty()) fail("robust rigid: every one of the {} starts lost the cloud", rotations.size());
+    const RigidCandidate* identity = out.candidates.front().start == "identity" ? &out.candidates.front() : nullptr;
     const RigidCandidate* best = nullptr;
     for (const auto& c : out.candidates)
         if (c.plausible && (!best || c.cloud_mean_mm < best->cloud_mean_mm)) best = &c;
     // Another start must beat the plain fit clearly: a small gain does not pay for a new pose.
-    if (best && identity.plausible && best->cloud_mean_mm >= (1.0 - options.improvement) * identity.cloud_mean_mm) best = &identity;
+    if (best && identity && identity->plausible && best->cloud_mean_mm >= (1.0 - options.improvement) * identity->cloud_mean_mm) best = identity;
     if (best) {
         out.chosen = best->result;
         out.chosen_start = best->start;
-        out.decision = best == &identity ? "the plain fit (identity start): no other start fitted the cloud clearly better while keeping the supports"
-                                         : fmt::format("start '{}': fits the cloud {:.0f} % closer than the plain fit and keeps the supports",
-                                                       best->start, 100.0 * (1.0 - best->cloud_mean_mm / identity.cloud_mean_mm));
+        out.decision = best == identity ? "the plain fit (identity start): no other start fitted the cloud clearly better while keeping the supports"
+                       : identity   ? fmt::format("start '{}': fits the cloud {:.0f} % closer than the plain fit and keeps the supports",
+                                                  best->start, 100.0 * (1.0 - best->cloud_mean_mm / identity->cloud_mean_mm))
+                                    : fmt::format("start '{}': the best fit that keeps the supports (the plain fit from the identity drifted off the cloud)",
+                                                  best->start);
         // Ambiguity: another plausible pose, as good within the margin, rotated far from this one.
         for (const auto& c : out.candidates)
             if (c.plausible && &c != best && c.cloud_mean_mm <= (1.0 + options.ambiguous_fit) * best->cloud_mean_mm &&

@@ -34,7 +34,7 @@ namespace physreg {
 /// their ranges and help). The meshing ones (cell_size, seed, surface_scale, region_radius,
 /// vessel_scale, vessel_radius) are read where a case is made from files.
 struct PartialSurfaceSettings {
-    std::string method = "biomechanical";     ///< the result written: biomechanical, adjoint, rigid, icp
+    std::string method = "adjoint";           ///< the result written: adjoint, biomechanical, rigid, icp
     std::string safeguard = "conservative";   ///< conservative: a flagged deformable result gives way to rest (or rigid when it explains the cloud); keep
     std::string model_kind = "homogeneous";   ///< homogeneous, heterogeneous (capsule and vessels)
     double capsule_thickness = 0.1;           ///< mm
@@ -53,6 +53,14 @@ struct PartialSurfaceSettings {
     double support_stiffness = 0.0;           ///< N/mm; 0: held
     double spring_stiffness = 0.0;            ///< N/mm, the springs hypothesis; 0: 0.01 × E × mean edge
     double support_tolerance = 3.0;           ///< mm
+    /// Where forces may act (issue 56 item 2; empty: anywhere on the surface): node ids (a file),
+    /// surface nodes within load_radius of picked points (a landmark file), or of a tracked tool's
+    /// path (its sphere centres, "x,y,z;…" mm LPS) within tool_radius.
+    std::string load_nodes;
+    std::string load_points;
+    double load_radius = 10.0;                ///< mm, around load points
+    std::string tool_path;
+    double tool_radius = 0.0;                 ///< mm; required with tool_path
     double noise = 0.5;                       ///< mm, the adjoint method's discrepancy principle
     std::string uncertainty = "halves";       ///< halves: the cloud's two random halves registered apart (precision, resolved motion); none
     double time_step = 0.1;                   ///< s
@@ -86,6 +94,8 @@ struct PartialSurfaceCase {
     std::string support_points_source;        ///< names them in errors and the summary
     std::vector<std::int32_t> support_nodes;  ///< further supports: node ids
     std::string support_nodes_source;
+    std::vector<std::int32_t> load_nodes;     ///< where forces may act besides the settings' load region: node ids
+    std::string load_nodes_source;
     std::optional<LandmarkSet> landmarks, truth; ///< targets at rest, and their true deformed positions
     std::optional<SurfaceMesh> truth_surface;
     std::optional<VolumeMesh> truth_mesh;     ///< a truth's mesh with its nodal displacement (nodal error)
@@ -111,7 +121,14 @@ struct PartialSurfaceSafeguard {
     std::string requested;                     ///< settings.method
     std::string answer;                        ///< the method whose result is written
     std::string statement;                     ///< one sentence for the log and the report
+    std::vector<std::string> notes;            ///< what was weighed and set aside (a rigid pose too large to trust)
+    std::string runner_up;                     ///< the best-fitting other candidate (the method asked for, a trusted rigid fit, at rest)
+    double margin_mm = 0.0;                    ///< its mean cloud distance minus the answer's (negative: the runner-up fits better)
 };
+
+/// A rigid fit turning the model by more than this is no fallback unless it explains the cloud to
+/// the noise (issue 56 item 4).
+inline constexpr double max_plausible_rigid_angle_deg = 15.0;
 
 struct PartialSurfaceResult {
     PartialSurfaceSettings settings;
@@ -137,9 +154,13 @@ struct PartialSurfaceResult {
 /// does not already meet the noise); keep keeps it.
 /// `halves` (optional) is the cloud-halves check: {"resolved": false, "statement": …} flags an
 /// answer whose motion the two halves of the cloud do not agree on (summary.json's "uncertainty").
+/// Issue 56: a rigid fit ("rigid": {"rotation_deg", "translation_mm"}) that turns the model by more
+/// than max_plausible_rigid_angle_deg or moves it by more than a quarter of `model_size_mm` (the
+/// model's bounding-box diagonal; 0: not judged) neither flags nor replaces the deformable answer
+/// unless it meets the cloud to `noise_level_mm`; it is named in the notes instead.
 PartialSurfaceSafeguard judge_deformable_answer(const nlohmann::json& evaluated, const nlohmann::json& determinacy, bool rigid_pose_determined,
                                                 const std::string& requested, const std::string& setting, double noise_level_mm,
-                                                const nlohmann::json& halves = nlohmann::json::object());
+                                                const nlohmann::json& halves = nlohmann::json::object(), double model_size_mm = 0.0);
 
 /// The cloud-halves check's decision (issue 46 item 5), apart from the registrations that feed it:
 /// `spread_mm` is the mean distance between the two halves' answers, `motion_mm` the mean motion of

@@ -30,7 +30,12 @@ struct AdjointSurfaceOptions {
     double young_modulus_pa = 3500.0;
     double poisson_ratio = 0.45;
     std::vector<std::int32_t> fixed_nodes;       ///< held supports; empty: soft springs everywhere
-    double soft_spring_fraction = 1e-4;          ///< no support: spring = this × the mean diagonal of K
+    double support_stiffness_n_per_mm = 0.0;     ///< 0: fixed_nodes held; > 0: each tied to rest by springs of this stiffness
+    /// The controls: nodes where forces may act (issue 56: the tool's contact region); empty:
+    /// every free surface node. Held nodes among them carry none.
+    std::vector<std::int32_t> load_nodes;
+    double soft_spring_fraction = 1e-4;          ///< no support: spring = this × the mean diagonal of K…
+    double spring_stiffness_n_per_mm = 0.0;      ///< …or this, N/mm per node and direction, when > 0
     double noise_mm = 0.5;                       ///< σ of the cloud, for the discrepancy principle
     double discrepancy_factor = 1.5;             ///< τ: stop at RMS distance ≤ τ σ (the model's own discretisation error adds to σ)
     int alpha_steps = 13;                        ///< α_k = α_0 · 10^(−k/2), k = 0 … steps−1
@@ -59,6 +64,7 @@ struct AdjointSurfaceResult {
     bool discrepancy_reached = false;      ///< false: the smallest α was kept (noise level never reached)
     std::vector<std::string> warnings;     ///< L-BFGS stops other than convergence, with their history
     int solves = 0;
+    double spring_stiffness_n_per_mm = 0.0; ///< the springs to rest at every node (no support), N/mm
     double seconds = 0.0;
 };
 

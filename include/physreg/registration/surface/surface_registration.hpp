@@ -50,6 +50,9 @@ struct SurfaceRegistrationOptions {
     /// 0: `fixed_nodes` held (Dirichlet); > 0: each tied to its rest position by a spring of this
     /// stiffness per direction (N/mm), because ligaments stretch.
     double support_stiffness_n_per_mm = 0.0;
+    /// Where the pair forces may act (issue 56: the tool's contact region); empty: at every node.
+    /// Pair forces and their stiffness at other nodes are dropped.
+    std::vector<std::int32_t> load_nodes;
     /// Supports that hold only some directions (a table's normal), always held; node ids checked.
     std::vector<NodeConstraint> partial_supports;
     /// Tissue–tissue penalty coupling of a model with split interfaces (paper 000's coupled body
@@ -94,12 +97,17 @@ struct SurfaceRegistrationResult {
     /// plateau's forces) and which plateau's result is kept.
     std::string stopped;
     std::size_t inverted_elements = 0; ///< in the step that stopped it
+    /// Steps undone and retried with the pairs softened by half because an element inverted or the
+    /// step could not be solved (issue 56 item 5), and the softening at the end (1: none).
+    int backoffs = 0;
+    double final_softening = 1.0;
 };
 
 /// `progress(fraction, message)` after every plateau. Throws Error for bad options, a cloud label
-/// without schedule or model region, a cloud with no pair left after pruning and a non-converging
-/// time step. A plateau whose forces invert elements is numerical trouble, not bad input: the
-/// annealing stops, the last completed plateau's state is returned and `stopped` says why (issue 46).
+/// without schedule or model region and a cloud with no pair left after pruning. A step whose
+/// forces invert elements or cannot be solved is numerical trouble, not bad input: it is undone
+/// and retried with softened pairs (issue 56); when that fails six times in a plateau the annealing
+/// stops, the last completed plateau's state is returned and `stopped` says why (issue 46).
 SurfaceRegistrationResult register_surface_biomechanical(const TledModel& model, const SurfaceMatcher& matcher, const LabelledPointCloud& cloud,
                                                          const SurfaceRegistrationOptions& options,
                                                          const std::function<void(double, const std::string&)>& progress = {});
