@@ -28,16 +28,19 @@ void bind_image_pipeline(py::module_& m)
     py::class_<ImagePair>(m, "ImagePair",
                           "Paper 002's input: a fixed (intra-operative) image and segmentation, a moving (pre-operative) image and "
                           "segmentation to be meshed, optional landmarks for the TRE and initial tissues.")
-        .def(py::init([](const py::array& fixed, const py::array& fixed_labels, const ImageGeometry& fixed_geometry, const py::array& moving,
+        .def(py::init([](const std::optional<py::array>& fixed, const py::array& fixed_labels, const ImageGeometry& fixed_geometry, const std::optional<py::array>& moving,
                          const py::array& moving_labels, const ImageGeometry& moving_geometry,
                          std::optional<std::map<std::string, std::array<double, 3>>> landmarks_fixed,
                          std::optional<std::map<std::string, std::array<double, 3>>> landmarks_moving,
                          std::optional<std::map<std::int32_t, std::pair<double, double>>> tissues, const std::string& auto_hold) {
                  ImagePair p;
-                 p.fixed = scalar_image_from(fixed, fixed_geometry, "fixed");
+                 if (fixed.has_value() != moving.has_value()) throw py::value_error("fixed, moving: give both images or neither (None: a label-to-label pair)");
                  p.fixed_labels = label_volume_from(fixed_labels, fixed_geometry);
-                 p.moving = scalar_image_from(moving, moving_geometry, "moving");
                  p.moving_labels = label_volume_from(moving_labels, moving_geometry);
+                 p.intensities = fixed.has_value();
+                 // Without images the label maps stand in (the label baselines only; see ImagePair::intensities).
+                 p.fixed = fixed ? scalar_image_from(*fixed, fixed_geometry, "fixed") : ScalarImage{p.fixed_labels.geometry, {p.fixed_labels.labels.begin(), p.fixed_labels.labels.end()}};
+                 p.moving = moving ? scalar_image_from(*moving, moving_geometry, "moving") : ScalarImage{p.moving_labels.geometry, {p.moving_labels.labels.begin(), p.moving_labels.labels.end()}};
                  if (landmarks_fixed.has_value() != landmarks_moving.has_value())
                      throw py::value_error("landmarks_fixed, landmarks_moving: give both or neither");
                  if (landmarks_fixed) {
@@ -56,7 +59,7 @@ void bind_image_pipeline(py::module_& m)
              }),
              py::arg("fixed"), py::arg("fixed_labels"), py::arg("fixed_geometry"), py::arg("moving"), py::arg("moving_labels"), py::arg("moving_geometry"),
              py::arg("landmarks_fixed") = py::none(), py::arg("landmarks_moving") = py::none(), py::arg("tissues") = py::none(), py::arg("auto_hold") = "none",
-             "Images are float32 and labels uint16 arrays [z, y, x] on their geometry; landmarks {name: (x, y, z)} mm LPS; tissues "
+             "Images are float32 and labels uint16 arrays [z, y, x] on their geometry (fixed = moving = None: a label-to-label pair, label baselines only); landmarks {name: (x, y, z)} mm LPS; tissues "
              "{label: (young_modulus_pa, poisson_ratio)} (default: 3 kPa, 0.45 for every structure); auto_hold: what the setting hold='auto' means.")
         .def_static("from_dataset", [](const std::filesystem::path& dataset, const std::string& state) {
             py::gil_scoped_release release;

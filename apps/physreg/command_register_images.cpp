@@ -36,17 +36,22 @@ struct Sources : CommonOptions {
 ImagePair load_pair(const Sources& o)
 {
     const bool files = !o.fixed.empty() || !o.fixed_labels.empty() || !o.moving.empty() || !o.moving_labels.empty();
-    if (o.dataset.empty() == !files || (files && (o.fixed.empty() || o.fixed_labels.empty() || o.moving.empty() || o.moving_labels.empty())))
-        fail("register-images: give --dataset DIR, or all four of --fixed, --fixed-labels, --moving and --moving-labels");
+    if (o.dataset.empty() == !files || (files && (o.fixed_labels.empty() || o.moving_labels.empty() || o.fixed.empty() != o.moving.empty())))
+        fail("register-images: give --dataset DIR, or --fixed-labels and --moving-labels (a label-to-label pair), with --fixed and --moving for their images");
     ImagePair pair;
     if (!o.dataset.empty()) {
         if (!o.landmarks_fixed.empty() || !o.landmarks_moving.empty()) fail("register-images: --dataset provides the landmarks; leave out --landmarks-fixed/--landmarks-moving");
         pair = read_dataset_image_pair(o.dataset, o.state);
     } else {
-        pair.fixed = read_scalar_image(o.fixed);
         pair.fixed_labels = read_label_volume(o.fixed_labels);
-        pair.moving = read_scalar_image(o.moving);
         pair.moving_labels = read_label_volume(o.moving_labels);
+        pair.intensities = !o.fixed.empty();
+        const auto as_image = [](const LabelVolume& l) {
+            ScalarImage image{l.geometry, std::vector<float>(l.labels.begin(), l.labels.end())};
+            return image;
+        };
+        pair.fixed = pair.intensities ? read_scalar_image(o.fixed) : as_image(pair.fixed_labels);
+        pair.moving = pair.intensities ? read_scalar_image(o.moving) : as_image(pair.moving_labels);
         if (o.landmarks_fixed.empty() != o.landmarks_moving.empty()) fail("register-images: give both --landmarks-fixed and --landmarks-moving, or neither");
         if (!o.landmarks_fixed.empty()) {
             pair.landmarks_fixed = read_landmarks(o.landmarks_fixed);
@@ -65,7 +70,7 @@ void write_outputs(const fs::path& folder, const ImageRegistrationResult& r)
 {
     const ImageMethodOutcome& chosen = r.chosen_method();
     write_label_volume(folder / "warped_labels.nii.gz", chosen.warped_labels);
-    write_scalar_image(folder / "warped_moving.nii.gz", r.warped_moving);
+    if (!r.warped_moving.values.empty()) write_scalar_image(folder / "warped_moving.nii.gz", r.warped_moving);
     write_displacement_field(folder / "displacement.nii.gz", chosen.field);
     if (chosen.landmarks) write_landmarks(folder / "landmarks.csv", *chosen.landmarks);
     const auto& b = r.biomechanical;

@@ -130,6 +130,19 @@ def test_a_pair_from_arrays(push):
     assert warped.dtype == np.uint16 and warped.shape == tuple(reversed(geometry.size))
     with pytest.raises(ValueError, match="give both or neither"):
         physreg.ImagePair(fixed, fixed_labels, fg, moving, moving_labels, mg, landmarks_fixed={"a": (0, 0, 0)})
+    # The label maps alone (issue 57: a label-to-label pair): the biomechanical method never reads
+    # intensities, so its answer is the same to the bit; intensity baselines are refused.
+    labels_only = physreg.ImagePair(None, fixed_labels, fg, None, moving_labels, mg,
+                                    landmarks_fixed=landmarks(push / state["landmarks"]),
+                                    landmarks_moving=landmarks(push / rest["landmarks"]), auto_hold="posterior")
+    same = physreg.register_image_pair(labels_only, structures=organs, **SMALL)
+    assert same.summary["intensities"] is False and r.summary["intensities"] is True
+    assert same.summary["methods"]["biomechanical"]["tre"]["all"] == methods["biomechanical"]["tre"]["all"]
+    assert np.array_equal(same.field()[0], r.field()[0])
+    with pytest.raises(physreg.Error, match="--baselines intensity needs the --fixed and --moving images"):
+        physreg.register_image_pair(labels_only, structures=organs, **dict(SMALL, baselines="intensity"))
+    with pytest.raises(ValueError, match="give both images or neither"):
+        physreg.ImagePair(fixed, fixed_labels, fg, None, moving_labels, mg)
 
 
 # ---- paper 001 -----------------------------------------------------------------------------------

@@ -219,7 +219,9 @@ void run_baselines(const ImagePair& in, const ScalarImage& fixed, const LabelVol
     baseline.demons_field_sigma_voxels = s.demons_sigma;
     baseline.seed = static_cast<unsigned>(s.seed);
     std::vector<std::pair<std::string, bool>> inputs;
-    if (s.baselines == "all" || s.baselines == "intensity") inputs.emplace_back("intensity", false);
+    // A label-to-label pair has no intensities: "all" is then every baseline it can run (summary
+    // "baselines_run"); "intensity" alone was refused before any work.
+    if ((s.baselines == "all" && in.intensities) || s.baselines == "intensity") inputs.emplace_back("intensity", false);
     if (s.baselines == "all" || s.baselines == "labels") inputs.emplace_back("labels", true);
     const int total = 3 * static_cast<int>(inputs.size());
     int done = 0;
@@ -285,6 +287,54 @@ json evaluate_method(const ImageMethodOutcome& m, const LabelVolume& fixed_label
 
 bool names_method(const std::string& name, const std::string& method) { return name == method || name == method + "_intensity" || name == method + "_labels"; }
 
+/// Issue 57 item 4: per baseline, whether it fits the boundaries better than the biomechanical
+/// answer (mean Dice higher by more than half a percent) and moves the interior differently (the
+/// two fields more than a voxel apart on average inside the fixed structures). Where both hold, the
+/// segmentations cannot say which interior is right: the summary says so rather than choosing.
+json against_baselines(const ImageRegistrationResult& result, const LabelVolume& fixed_labels, const std::vector<std::int32_t>& structures, const json& methods_json)
+{
+    const auto mean_dice = [&](const std::string& name) {
+        double sum = 0.0;
+        std::size_t n = 0;
+        for (const auto& [label, d] : methods_json.at(name).at("dice").items()) sum += d.get<double>(), ++n;
+        return n ? sum / static_cast<double>(n) : 0.0;
+    };
+    const ImageMethodOutcome* bio = nullptr;
+    for (const auto& m : result.methods)
+        if (m.name == "biomechanical") bio = &m;
+    json out = {{"entries", json::array()}};
+    if (!bio) return out;
+    const double voxel_mm = fixed_labels.geometry.spacing.maxCoeff();
+    const double bio_dice = mean_dice("biomechanical");
+    std::vector<std::string> conflicts;
+    for (const auto& m : result.methods) {
+        const bool baseline = m.name.size() > 7 && (m.name.rfind("_labels") == m.name.size() - 7 || m.name.rfind("_intensity") == m.name.size() - 10);
+        if (!baseline || m.field.components.size() != bio->field.components.size()) continue;
+        double sum = 0.0, largest = 0.0;
+        std::size_t n = 0;
+        for (std::size_t v = 0; v < fixed_labels.labels.size(); ++v) {
+            if (!std::count(structures.begin(), structures.end(), static_cast<std::int32_t>(fixed_labels.labels[v]))) continue;
+            const Eigen::Vector3f d(bio->field.components[3 * v] - m.field.components[3 * v], bio->field.components[3 * v + 1] - m.field.components[3 * v + 1],
+                                    bio->field.components[3 * v + 2] - m.field.components[3 * v + 2]);
+            sum += d.norm();
+            largest = std::max(largest, static_cast<double>(d.norm()));
+            ++n;
+        }
+        const double apart = n ? sum / static_cast<double>(n) : 0.0;
+        const double dice = mean_dice(m.name);
+        const bool fits_better = dice > bio_dice + 0.005, moves_differently = apart > voxel_mm;
+        out["entries"].push_back({{"method", m.name}, {"mean_dice", dice}, {"biomechanical_mean_dice", bio_dice}, {"interior_apart_mean_mm", apart},
+                                  {"interior_apart_max_mm", largest}, {"fits_the_boundaries_better", fits_better}, {"moves_the_interior_differently", moves_differently}});
+        if (fits_better && moves_differently) conflicts.push_back(fmt::format("{} (Dice {:.3f} against {:.3f}; {:.1f} mm apart inside)", m.name, dice, bio_dice, apart));
+    }
+    out["reading"] = conflicts.empty()
+                         ? std::string("no baseline both fits the boundaries better (Dice + 0.005) and moves the interior differently (more than a voxel apart on average)")
+                         : fmt::format("{} fit{} the boundaries better than the biomechanical answer and move{} the interior differently: the segmentations "
+                                       "alone cannot say which interior is right (the biomechanical one is the elastic extension of its boundary fit)",
+                                       fmt::join(conflicts, ", "), conflicts.size() == 1 ? "s" : "", conflicts.size() == 1 ? "s" : "");
+    return out;
+}
+
 } // namespace
 
 SegmentationRegistrationOptions ImageRegistrationSettings::solver_options() const
@@ -309,8 +359,8 @@ const SettingsSpec<ImageRegistrationSettings>& image_registration_spec()
     static const SettingsSpec<S> spec = [] {
         SettingsSpec<S> s("register-images");
         s.choice("method", "--method", &S::method, {"biomechanical", "rigid", "demons", "bspline"}, "the method whose result is written: biomechanical, rigid, demons or bspline")
-            .choice("initial", "--initial", &S::initial, {"identity", "centroid", "rigid"},
-                    "initial alignment of the segmentations before every method: identity, centroid or rigid (centroids, then rigid on the fixed structures' distance maps)")
+            .choice("initial", "--initial", &S::initial, {"identity", "centroid", "translation", "rigid"},
+                    "initial alignment of the segmentations before every method: identity, centroid, translation (centroids, then the translation that fits the fixed structures' distance maps) or rigid (centroids, then rigid on the distance maps)")
             .real("initial_min_reduction", "--initial-min-reduction", &S::initial_min_reduction, "",
                   "apply the initial alignment only when it removes more than this fraction of the structures' boundary RMS distance (0: always)", 0.0, 1.0)
             .real("initial_max_rotation", "--initial-max-rotation", &S::initial_max_rotation, "degrees",
@@ -581,6 +631,7 @@ json summary_json(const ImagePair& original, const ImageRegistrationSettings& s,
     summary["command"] = "register-images";
     summary["units"] = {{"length", "mm"}, {"force", "N"}, {"time", "s"}, {"young_modulus", "Pa"}};
     summary["inputs"] = original.description;
+    summary["intensities"] = original.intensities;
     summary["method"] = s.method;
     summary["settings"] = image_registration_spec().to_json(s);
     summary["structures"] = structures;
@@ -647,6 +698,8 @@ ImageRegistrationResult register_images(const ImagePair& original, const ImageRe
     const auto same = [](const ImageGeometry& a, const ImageGeometry& b) { return a.size == b.size && (a.origin - b.origin).norm() < 1e-6 && (a.spacing - b.spacing).norm() < 1e-9; };
     if (!same(original.fixed.geometry, original.fixed_labels.geometry)) fail("register-images: the fixed image and --fixed-labels are on different grids");
     if (!same(original.moving.geometry, original.moving_labels.geometry)) fail("register-images: the moving image and --moving-labels are on different grids");
+    if (!original.intensities && settings.baselines == "intensity")
+        fail("register-images: --baselines intensity needs the --fixed and --moving images (only label maps were given: use --baselines labels)");
     if (original.landmarks_fixed.has_value() != original.landmarks_moving.has_value())
         fail("register-images: give both --landmarks-fixed and --landmarks-moving, or neither");
 
@@ -717,11 +770,14 @@ ImageRegistrationResult register_images(const ImagePair& original, const ImageRe
         if (methods[k].name == s.method || methods[k].name == s.method + "_intensity" || (!chosen && methods[k].name == s.method + "_labels")) chosen = k;
     if (!chosen) fail("register-images: method {} was not run", s.method);
     result.chosen = *chosen;
-    result.warped_moving = resample_image(original.moving, result.chosen_method().field, 0.0f);
+    if (original.intensities) result.warped_moving = resample_image(original.moving, result.chosen_method().field, 0.0f);
 
     // 7. parameters.json and summary.json.
     result.parameters = parameters_json(model, tissues, b, reg);
     result.summary = summary_json(original, s, result, model, methods_json, reg);
+    result.summary["biomechanical_against_baselines"] = against_baselines(result, fixed_labels, structures, methods_json);
+    if (const auto& r = result.summary["biomechanical_against_baselines"]; r.contains("reading") && r["reading"].get<std::string>().rfind("no baseline", 0) != 0)
+        logger()->warn("register-images: {}", r["reading"].get<std::string>());
     result.summary["seconds"] = seconds_since(start);
     return result;
 }

@@ -711,7 +711,7 @@ LabelVolume symmetric_gland(const Mat3& r, const Vec3& t, const Vec3& lesion)
     const Vec3 centre(45, 36, 30);
     return test::make_volume({60, 48, 40}, [&](int i, int j, int k) {
         const Vec3 y = 1.5 * Vec3(i + 0.5, j + 0.5, k + 0.5);
-        const Vec3 x = r.transpose() * (y - t - centre);
+        const Vec3 x = r.inverse() * (y - t - centre); // r: a rotation, or a shear
         if ((x - lesion).norm() < 6.0) return std::uint16_t(2);
         return std::uint16_t(std::pow(x[0] / 24, 2) + std::pow(x[1] / 16, 2) + std::pow(x[2] / 12, 2) < 1 ? 1 : 0);
     }, Vec3::Constant(1.5), Vec3::Zero());
@@ -737,7 +737,7 @@ TEST(SegmentationAlignment, ANearSymmetricGlandNeverFlipsYetATrueHalfTurnIsFound
     ASSERT_FALSE(kept.runner_up.empty());
     EXPECT_GT(kept.runner_up_rotation_deg, 120.0);
     EXPECT_LT(kept.runner_up_margin_mm, 0.0) << "the flipped pose fits a little better";
-    EXPECT_EQ(kept.hypotheses.size(), 5u);
+    EXPECT_EQ(kept.hypotheses.size(), 6u) << "centroids, four principal-axes starts, the translation";
 
     // A frame truly turned 150° about z (the lesion where it was): the far pose wins by evidence.
     const Mat3 turn150 = Eigen::AngleAxisd(150.0 * M_PI / 180, Vec3::UnitZ()).toRotationMatrix();
@@ -747,6 +747,45 @@ TEST(SegmentationAlignment, ANearSymmetricGlandNeverFlipsYetATrueHalfTurnIsFound
     EXPECT_NE(far.decision.find("less than half"), std::string::npos) << far.decision;
     EXPECT_NE(test::error_message([&] { align_segmentations(fixed, moving, {1, 2}, InitialAlignment::rigid, 0.0); }).find("(0, 180]"),
               std::string::npos);
+}
+
+// Issue 57: a rotation must beat the translation alone by evidence. A gland sheared by the probe
+// (x += 0.25 y: a shear is half a rotation and half a stretch) and shifted by (6, −4, 3) mm is not
+// turned, though the rigid fit turns to absorb half the shear: the translation is kept, and the
+// pose the fit would have taken is in the hypotheses. A gland truly turned 20° about z is turned
+// back (its boundary resolves the turn). About its long axis (x: semi-axes 16 and 12 mm across it)
+// the same turn leaves 0.81 mm to the translation and 0.42 mm to the turn: not resolved by half, the
+// translation is kept (the non-rigid stage sees the rest).
+TEST(SegmentationAlignment, AShearedGlandKeepsTheTranslationAndATrueTurnIsFound)
+{
+    const Vec3 centre(45, 36, 30), shift(6, -4, 3);
+    const LabelVolume moving = symmetric_gland(Mat3::Identity(), Vec3::Zero(), Vec3(8, 4, 2));
+    Mat3 shear = Mat3::Identity();
+    shear(0, 1) = 0.25;
+    const LabelVolume sheared = symmetric_gland(shear, shift, Vec3(8, 4, 2));
+    const SegmentationAlignment kept = align_segmentations(sheared, moving, {1, 2}, InitialAlignment::rigid);
+    EXPECT_EQ(kept.start, "translation") << kept.decision;
+    EXPECT_EQ(kept.rotation_deg, 0.0) << kept.decision;
+    EXPECT_NE(kept.decision.find("kept the translation"), std::string::npos) << kept.decision;
+    EXPECT_NEAR(kept.translation[0], shift[0], 1.0);
+    EXPECT_NEAR(kept.translation[1], shift[1], 1.0);
+    EXPECT_NEAR(kept.translation[2], shift[2], 1.0);
+    double turned = 0.0;
+    for (const auto& h : kept.hypotheses)
+        if (h.start == "centroids") turned = h.rotation_deg;
+    EXPECT_GT(turned, 3.0) << "the rigid fit turns to absorb the shear (else this test tests nothing)";
+
+    const Mat3 turn20 = Eigen::AngleAxisd(20.0 * M_PI / 180, Vec3::UnitZ()).toRotationMatrix();
+    const SegmentationAlignment found = align_segmentations(symmetric_gland(turn20, shift, Vec3(8, 4, 2)), moving, {1, 2}, InitialAlignment::rigid);
+    EXPECT_NEAR(found.rotation_deg, 20.0, 2.0) << found.decision;
+    EXPECT_NE(found.decision.find("the rotation resolves the boundaries"), std::string::npos) << found.decision;
+    const Mat3 roll20 = Eigen::AngleAxisd(20.0 * M_PI / 180, Vec3::UnitX()).toRotationMatrix();
+    const SegmentationAlignment rolled = align_segmentations(symmetric_gland(roll20, shift, Vec3(8, 4, 2)), moving, {1, 2}, InitialAlignment::rigid);
+    EXPECT_EQ(rolled.start, "translation") << rolled.decision;
+    // The translation mode never turns.
+    const SegmentationAlignment shifted = align_segmentations(symmetric_gland(turn20, shift, Vec3(8, 4, 2)), moving, {1, 2}, InitialAlignment::translation);
+    EXPECT_EQ(shifted.rotation_deg, 0.0);
+    EXPECT_EQ(parse_initial_alignment("translation"), InitialAlignment::translation);
 }
 
 } // namespace physreg

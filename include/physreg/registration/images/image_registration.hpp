@@ -77,6 +77,9 @@ void validate(const ImageRegistrationSettings& settings, SettingNaming naming);
 struct ImagePair {
     ScalarImage fixed, moving;
     LabelVolume fixed_labels, moving_labels;
+    /// false: no intensity images were given (a label-to-label pair): fixed and moving are the
+    /// label maps as values, the intensity baselines are not run and no warped image is written.
+    bool intensities = true;
     std::optional<LandmarkSet> landmarks_fixed, landmarks_moving;
     /// Initial moduli and Poisson ratios per structure; empty: 3 kPa, ν 0.45 for every structure
     /// (only ratios are estimated).
@@ -112,7 +115,7 @@ struct ImageRegistrationResult {
     std::vector<ImageMethodOutcome> methods;
     std::map<std::string, std::string> failed_baselines; ///< name → reason
     std::size_t chosen = 0;                 ///< index in methods of settings.method's result
-    ScalarImage warped_moving;              ///< the moving image through the chosen field
+    ScalarImage warped_moving;              ///< the moving image through the chosen field (empty: no intensities)
     nlohmann::json summary, parameters;     ///< summary.json and parameters.json, as written
     const ImageMethodOutcome& chosen_method() const { return methods.at(chosen); }
 };

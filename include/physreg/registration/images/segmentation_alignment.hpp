@@ -10,7 +10,9 @@
 // as well as itself. So the best pose within `max_plausible_rotation_deg` of the identity wins
 // unless a pose farther out fits the boundaries at most half as far and closer by more than a
 // voxel of the fixed image (a margin the data resolve); every hypothesis, the runner-up and the
-// margin are reported. Written here rather than with ITK's rigid registration of
+// margin are reported. The translation alone (from the centroids, no rotation) is a hypothesis
+// too (issue 57), and the one the winning rotated pose must beat: it must leave at most half the
+// translation's distance, or the translation is kept (180°: the best fit alone, as before). Written here rather than with ITK's rigid registration of
 // label images because the distance-map cost needs no overlap to start from and gives each
 // structure its own term.
 #include "physreg/core/types.hpp"
@@ -21,13 +23,13 @@
 
 namespace physreg {
 
-enum class InitialAlignment { identity, centroid, rigid };
-InitialAlignment parse_initial_alignment(const std::string& text); ///< identity | centroid | rigid
+enum class InitialAlignment { identity, centroid, rigid, translation };
+InitialAlignment parse_initial_alignment(const std::string& text); ///< identity | centroid | translation | rigid
 std::string to_string(InitialAlignment mode);
 
 /// One start's refined pose.
 struct AlignmentHypothesis {
-    std::string start;                   ///< centroids, principal axes 0 … 3
+    std::string start;                   ///< centroids, principal axes 0 … 3, translation
     double rms_boundary_distance_mm = 0.0;
     double rotation_deg = 0.0;           ///< of the refined pose from the identity
     bool plausible = true;               ///< rotation within max_plausible_rotation_deg
