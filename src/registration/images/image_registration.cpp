@@ -523,7 +523,12 @@ ImageMethodOutcome biomechanical_outcome(const ImagePair& in, const VolumeMesh& 
         for (std::size_t v = 0; v < m.warped_labels.labels.size(); ++v)
             if (!inverse.coverage[v] && std::count(model_labels.begin(), model_labels.end(), m.warped_labels.labels[v])) m.warped_labels.labels[v] = 0;
         if (in.landmarks_moving) {
-            const auto where = embed_landmarks(mesh, *in.landmarks_moving, 1.5 * s.cell_size, "the moving structures' mesh (landmarks)");
+            // A landmark a little outside the segmented structures (partial volume, an unsegmented
+            // neighbour) is carried by the nearest element; the allowance must not shrink with a
+            // finer mesh (3 mm cells refused a public pair's landmark 4.8 mm outside its gland), so
+            // it is 1.5 cells or 5 voxels of the moving image, whichever is larger.
+            const double allowance = std::max(1.5 * s.cell_size, 5.0 * in.moving_labels.geometry.spacing.maxCoeff());
+            const auto where = embed_landmarks(mesh, *in.landmarks_moving, allowance, "the moving structures' mesh (landmarks)");
             m.landmarks = displace_landmarks(mesh, where, *in.landmarks_moving, u);
         }
         m.details = {{"initial_rms_distance_mm", b.initial_rms_mm}, {"rms_distance_mm", b.rms_distance_mm}, {"moduli_prior_mm2", b.prior_mm2}, {"evaluations", b.evaluations},

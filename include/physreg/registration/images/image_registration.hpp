@@ -35,7 +35,7 @@ namespace physreg {
 struct ImageRegistrationSettings {
     std::string method = "biomechanical";   ///< the result written: biomechanical, rigid, demons, bspline
     std::string initial = "rigid";          ///< identity, centroid, rigid
-    double initial_min_reduction = 0.5;     ///< fraction of the boundary RMS distance the alignment must remove
+    double initial_min_reduction = 0.4;     ///< fraction of the boundary RMS distance the alignment must remove (issue 57: 0.5 → 0.4)
     double initial_max_rotation = 60.0;     ///< degrees: a pose turned farther from the identity must win by a margin the data resolve
     std::string baselines = "all";          ///< all, intensity, labels, none
     std::string hold = "auto";              ///< posterior, none, auto (ImagePair::auto_hold)

@@ -11,8 +11,10 @@
 // unless a pose farther out fits the boundaries at most half as far and closer by more than a
 // voxel of the fixed image (a margin the data resolve); every hypothesis, the runner-up and the
 // margin are reported. The translation alone (from the centroids, no rotation) is a hypothesis
-// too (issue 57), and the one the winning rotated pose must beat: it must leave at most half the
-// translation's distance, or the translation is kept (180°: the best fit alone, as before). Written here rather than with ITK's rigid registration of
+// too (issue 57). With a single structure, whose deformed outline can look turned, it is the one
+// the winning rotated pose must beat: it must leave at most half the translation's distance, or the
+// translation is kept (180°: the best fit alone). Two or more structures resolve the turn by their
+// layout: there the rotated pose wins as before. Written here rather than with ITK's rigid registration of
 // label images because the distance-map cost needs no overlap to start from and gives each
 // structure its own term.
 #include "physreg/core/types.hpp"
