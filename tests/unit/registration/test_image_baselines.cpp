@@ -6,6 +6,7 @@
 #include "physreg/core/error.hpp"
 #include "physreg/field/field_mapping.hpp"
 #include "physreg/registration/images/image_baselines.hpp"
+#include "physreg/registration/images/image_registration.hpp"
 
 #include <cmath>
 
@@ -102,4 +103,51 @@ TEST(FieldMapping, InversionAndResamplingFollowTheField)
 }
 
 } // namespace
+
+// Issue 57: label maps alone are a pair. The whole pipeline on a pair without intensities (the
+// label maps stand in, as the command makes them): the label baselines run and the intensity ones
+// do not, nothing is warped, the summary says so and compares each baseline with the answer; the
+// lesion's centre, shifted by (4, −2, 2) mm, is found. Asking for intensity baselines is refused.
+TEST(ImageRegistration, LabelMapsAloneAreAPair)
+{
+    const Vec3 shift(4.0, -2.0, 2.0);
+    ImagePair pair;
+    pair.fixed_labels = organ(shift);
+    pair.moving_labels = organ(Vec3::Zero());
+    pair.intensities = false;
+    const auto as_image = [](const LabelVolume& l) { return ScalarImage{l.geometry, std::vector<float>(l.labels.begin(), l.labels.end())}; };
+    pair.fixed = as_image(pair.fixed_labels);
+    pair.moving = as_image(pair.moving_labels);
+    const Vec3 lesion(46, 38, 32); // the ball's centre at rest, mm
+    pair.landmarks_moving = LandmarkSet{{"lesion", lesion, LandmarkType::tumour}};
+    pair.landmarks_fixed = LandmarkSet{{"lesion", lesion + shift, LandmarkType::tumour}};
+    ImageRegistrationSettings s;
+    s.baselines = "all"; // every baseline the pair can run: the label ones
+    s.cell_size = 8.0;
+    s.cycles = 4;
+    const ImageRegistrationResult r = register_images(pair, s);
+    std::vector<std::string> names;
+    for (const auto& m : r.methods) names.push_back(m.name);
+    for (const char* expected : {"biomechanical", "rigid_labels", "demons_labels", "bspline_labels"})
+        EXPECT_NE(std::find(names.begin(), names.end(), expected), names.end()) << expected;
+    for (const auto& n : names) EXPECT_EQ(n.find("_intensity"), std::string::npos) << n;
+    EXPECT_TRUE(r.warped_moving.values.empty());
+    EXPECT_FALSE(r.summary.at("intensities").get<bool>());
+    const auto& against = r.summary.at("biomechanical_against_baselines");
+    EXPECT_EQ(against.at("entries").size(), 3u);
+    for (const auto& e : against.at("entries")) {
+        EXPECT_GE(e.at("interior_apart_mean_mm").get<double>(), 0.0);
+        EXPECT_GE(e.at("interior_apart_max_mm").get<double>(), e.at("interior_apart_mean_mm").get<double>());
+    }
+    EXPECT_FALSE(against.at("reading").get<std::string>().empty());
+    EXPECT_LT(r.summary.at("methods").at("biomechanical").at("tre").at("all").at("mean_mm").get<double>(), 1.5)
+        << "the lesion, shifted by 4.9 mm, is found to within a voxel or so";
+
+    ImageRegistrationSettings intensity = s;
+    intensity.baselines = "intensity";
+    EXPECT_NE(test::error_message([&] { register_images(pair, intensity); }).find("--baselines intensity needs the --fixed and --moving images"),
+              std::string::npos);
+}
+
 } // namespace physreg
+
