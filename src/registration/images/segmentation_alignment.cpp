@@ -254,8 +254,8 @@ SegmentationAlignment align_segmentations(const LabelVolume& fixed, const LabelV
         const double voxel_mm = fixed.geometry.spacing.maxCoeff();
         std::size_t chosen = choose_hypothesis(out.hypotheses, max_plausible_rotation_deg, voxel_mm, &out.decision);
         // Issue 57: the translation alone is a hypothesis too. One structure's outline barely
-        // resolves its rotation: on 20 public MR → TRUS gland pairs the rigid fit turned 2–60° (117°
-        // once) to gain 2–40 % of the boundary RMS distance, and left the landmarks 7.5 mm off where
+        // resolves its rotation: on 20 public MR → TRUS gland pairs the rigid fit turned 1–60° (117°
+        // once) to gain 0–40 % of the boundary RMS distance, and left the landmarks 7.5 mm off where
         // the translation left 5.2 mm (a deformed outline looks turned). So with one structure a
         // rotation is taken only when it leaves at most half the distance the translation leaves
         // (there it explains more than the deformation does). Two or more structures resolve the
