@@ -373,6 +373,23 @@ TEST(SurfaceMatching, PairForcesAreMinusThePotentialsGradientAndTheirBoundCovers
     }
 }
 
+namespace {
+// The adjoint tests' case: the ellipsoid's anterior cloud moved by `motion`, matched against the
+// unlabelled boundary, the posterior surface nodes held.
+struct HeldAtTheBack {
+    HeldAtTheBack(const SurfaceModel& model, const std::function<Vec3(const Vec3&)>& motion)
+        : cloud(anterior_cloud(model, motion)), surface(unlabelled_boundary(model.mesh)), matcher(surface, model.mesh.node_count(), "ellipsoid")
+    {
+        options.matching.distance_fraction = 1.0;
+        options.fixed_nodes = surface_nodes_facing(model.mesh, surface, Vec3::UnitY(), 0.5);
+    }
+    LabelledPointCloud cloud;
+    LabelledTriangles surface;
+    SurfaceMatcher matcher;
+    AdjointSurfaceOptions options;
+};
+} // namespace
+
 TEST(SurfaceRegistration, AdjointMethodFollowsAStretchAndStopsAtTheNoiseLevel)
 {
     // The anterior side moved by a 4 % stretch about the centre plus 1.5 mm: held at the back, the
@@ -380,12 +397,10 @@ TEST(SurfaceRegistration, AdjointMethodFollowsAStretchAndStopsAtTheNoiseLevel)
     const SurfaceModel& model = ellipsoid_model();
     const Vec3 centre(36, 24, 19.5);
     const auto motion = [&](const Vec3& p) { return Vec3(p + 0.04 * (p - centre) + Vec3(0, -1.5, 0)); };
-    const LabelledPointCloud cloud = anterior_cloud(model, motion);
-    const LabelledTriangles surface = unlabelled_boundary(model.mesh);
-    const SurfaceMatcher matcher(surface, model.mesh.node_count(), "ellipsoid");
-    AdjointSurfaceOptions options;
-    options.matching.distance_fraction = 1.0;
-    options.fixed_nodes = surface_nodes_facing(model.mesh, surface, Vec3::UnitY(), 0.5);
+    HeldAtTheBack c(model, motion);
+    const LabelledPointCloud& cloud = c.cloud;
+    const SurfaceMatcher& matcher = c.matcher;
+    AdjointSurfaceOptions& options = c.options;
     options.noise_mm = 0.1;
     const AdjointSurfaceResult r = register_surface_adjoint(model.mesh, matcher, cloud, options);
     ASSERT_FALSE(r.rungs.empty());
@@ -407,12 +422,11 @@ TEST(SurfaceRegistration, AdjointForcesActOnlyWhereTheToolMayPressAndElasticSupp
     const SurfaceModel& model = ellipsoid_model();
     const Vec3 tool(36, 4, 19.5);
     const auto motion = [&](const Vec3& p) { return Vec3(p + Vec3(0, 3.0 * std::exp(-(p - tool).squaredNorm() / 200.0), 0)); };
-    const LabelledPointCloud cloud = anterior_cloud(model, motion);
-    const LabelledTriangles surface = unlabelled_boundary(model.mesh);
-    const SurfaceMatcher matcher(surface, model.mesh.node_count(), "ellipsoid");
-    AdjointSurfaceOptions options;
-    options.matching.distance_fraction = 1.0;
-    options.fixed_nodes = surface_nodes_facing(model.mesh, surface, Vec3::UnitY(), 0.5);
+    HeldAtTheBack c(model, motion);
+    const LabelledPointCloud& cloud = c.cloud;
+    const LabelledTriangles& surface = c.surface;
+    const SurfaceMatcher& matcher = c.matcher;
+    AdjointSurfaceOptions& options = c.options;
     options.load_nodes = surface_nodes_near(model.mesh, surface, {tool}, 9.0);
     ASSERT_GT(options.load_nodes.size(), 3u);
     options.noise_mm = 0.1;
