@@ -309,6 +309,10 @@ def safeguard_section(summary):
                 + f". Rule: {esc(halves.get('rule', ''))}.</p>")
     elif isinstance(halves, dict):
         out += f"<p>Uncertainty: {esc(halves.get('statement', ''))}.</p>"
+    predicted = summary.get("predicted_error")
+    if isinstance(predicted, dict):
+        # Issue 56 item 6: the error the answer's strain energy predicts, calibrated on public data.
+        out += f"<p>Predicted error: {esc(predicted.get('statement', ''))}" + (f". Rule: {esc(predicted['rule'])}" if predicted.get("rule") else "") + ".</p>"
     truth = summary.get("truth", {}).get("implied_rigid_motion") if isinstance(summary.get("truth"), dict) else None
     head = "<tr><th>method</th><th>cloud → model mean</th><th>strain energy</th><th>largest displacement</th><th>implied rotation</th><th>rigid start</th></tr>"
     body = []

@@ -19,13 +19,17 @@ pytestmark = pytest.mark.skipif(not (LIVER / "mesh-default" / "liver.msh").exist
 def frame():
     """neohookean/s1 frame 0 in mm: the model (the generator's own mesh), the cloud, the truth at
     the 604 interior nodes, the generator's Dirichlet nodes and the sequence's force patch."""
+    return load_frame(0)
+
+
+def load_frame(k):
     mesh = physreg.read_mesh(LIVER / "mesh-default" / "liver.msh")
     mesh.nodes[:] *= 1000.0  # the package is in metres
     model = physreg.SurfaceModel.from_mesh(mesh)
     rest = np.array(mesh.nodes)
     seq = LIVER / "sequences" / "neohookean" / "s1"
-    truth = 1000.0 * np.load(seq / "positions-default.npy")[0]
-    cloud = 1000.0 * np.loadtxt(seq / "pointclouds" / "pc00.txt")
+    truth = 1000.0 * np.load(seq / "positions-default.npy")[k]
+    cloud = 1000.0 * np.loadtxt(seq / "pointclouds" / f"pc{k:02d}.txt")
     interior = np.setdiff1d(np.arange(len(rest)), np.unique(model.surface_triangles))
     assert len(interior) == 604
     landmarks = {f"n{i}": tuple(rest[i]) for i in interior}
@@ -87,3 +91,20 @@ def test_a_load_region_nowhere_near_the_cloud_is_refused(frame):
     inside = np.setdiff1d(np.arange(len(nodes)), surface)[:1]
     with pytest.raises(physreg.Error, match="is not on the model's surface"):
         physreg.register_partial_surface(physreg.PartialSurfaceCase(model, frame["cloud"], load_nodes=[int(inside[0])]))
+
+
+def test_the_predicted_error_ranks_a_small_and_a_large_push(frame):
+    """Issue 56 item 6: the error predicted from the answer's strain energy, on two frames the
+    calibration never saw (it used frames 0, 10, .., 40): the larger push is predicted the larger
+    error, as it is, and the stated interval is a real interval around the prediction."""
+    small, large = load_frame(5), load_frame(45)
+    out = []
+    for f in (small, large):
+        case = physreg.PartialSurfaceCase(f["model"], f["cloud"], landmarks=f["landmarks"], truth=f["truth"])
+        p = physreg.register_partial_surface(case, uncertainty="none")
+        out.append((p.summary["predicted_error"], tre(p, "adjoint")))
+    (p5, t5), (p45, t45) = out
+    assert t45 > t5 and p45["mean_mm"] > p5["mean_mm"], (p5, t5, p45, t45)
+    for p, _ in out:
+        assert p["regime"] == "springs" and p["interval_mm"][0] < p["mean_mm"] < p["interval_mm"][1]
+        assert "strain energy" in p["statement"]

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 // evaluation/ against hand-computed values (issue 43 item 5): TRE statistics and groups, Dice and
-// surface distances of label volumes, point-to-surface and Hausdorff distances.
+// surface distances of label volumes, point-to-surface and Hausdorff distances, and the error
+// predicted from strain energy.
+#include "physreg/evaluation/predicted_error.hpp"
 #include "physreg/evaluation/segmentation_overlap.hpp"
 #include "physreg/evaluation/surface_distance.hpp"
 #include "physreg/evaluation/tre.hpp"
@@ -87,6 +89,36 @@ TEST(Evaluation, PointToSurfaceAndHausdorffDistances)
     EXPECT_NEAR(h.mean_mm(), 2.5, 1e-12);
     EXPECT_EQ(h.forward.samples, 6u); // 4 vertices and 2 centroids
     EXPECT_NE(test::error_message([&] { points_to_surface({Vec3::Zero()}, SurfaceMesh{}, "nothing"); }).find("nothing"), std::string::npos);
+}
+
+TEST(Evaluation, PredictedErrorScalesWithTheStrainTheEnergyImplies)
+{
+    // A 100 mm cube of a linear material (nu = 0) stretched uniformly by 2 %: U = E eps^2 V / 2, so
+    // the energy's displacement scale L sqrt(2U/(EV)) is exactly L eps = 2 mm, whatever E.
+    const double V = 1e6, eps = 0.02;
+    for (const double E : {1000.0, 3500.0, 20000.0}) {
+        const double U_mj = 0.5 * E * eps * eps * V * 1e-9 * 1e3; // Pa x m^3 = J, in mJ
+        const PredictedError p = predict_error_from_strain_energy(U_mj, E, V, SupportRegime::springs);
+        EXPECT_NEAR(p.energy_scale_mm, 2.0, 1e-9) << E;
+        EXPECT_GT(p.mean_mm, 0.0);
+        EXPECT_LT(p.low_mm, p.mean_mm);
+        EXPECT_GT(p.high_mm, p.mean_mm);
+        EXPECT_DOUBLE_EQ(p.interval_coverage, 0.8);
+    }
+    // Twice the strain, twice the predicted error; held supports predict less for the same energy
+    // (the springs let the organ drift, which costs little energy and much error).
+    const auto at = [&](double e, SupportRegime r) { return predict_error_from_strain_energy(0.5 * 3500 * e * e * V * 1e-6, 3500, V, r); };
+    EXPECT_NEAR(at(0.04, SupportRegime::springs).mean_mm, 2.0 * at(0.02, SupportRegime::springs).mean_mm, 1e-12);
+    EXPECT_LT(at(0.02, SupportRegime::held).mean_mm, at(0.02, SupportRegime::springs).mean_mm);
+    EXPECT_EQ(predict_error_from_strain_energy(0.0, 3500, V, SupportRegime::held).mean_mm, 0.0);
+    const nlohmann::json j = to_json(at(0.02, SupportRegime::held));
+    EXPECT_EQ(j["regime"], "held");
+    EXPECT_EQ(j["interval_mm"].size(), 2u);
+    // Impossible inputs name the parameter.
+    EXPECT_NE(test::error_message([&] { predict_error_from_strain_energy(-1.0, 3500, V, SupportRegime::held); }).find("strain energy"), std::string::npos);
+    EXPECT_NE(test::error_message([&] { predict_error_from_strain_energy(NAN, 3500, V, SupportRegime::held); }).find("strain energy"), std::string::npos);
+    EXPECT_NE(test::error_message([&] { predict_error_from_strain_energy(1.0, 0.0, V, SupportRegime::held); }).find("Young"), std::string::npos);
+    EXPECT_NE(test::error_message([&] { predict_error_from_strain_energy(1.0, 3500, -V, SupportRegime::held); }).find("volume"), std::string::npos);
 }
 
 } // namespace physreg
