@@ -5,7 +5,7 @@ BUILD ?= build
 JOBS ?= 2
 CMAKE_FLAGS ?=
 
-.PHONY: deps configure build demo test bench sanitize fuzz clean
+.PHONY: deps configure build demo test docs bench sanitize fuzz clean
 
 deps:
 	@bash scripts/install-deps.sh
@@ -21,6 +21,11 @@ demo: build
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j$(JOBS)
+
+# The documentation site (Sphinx + breathe + autodoc) into $(BUILD)/docs/html; warnings are errors.
+docs: build
+	@bash scripts/install-deps.sh docs
+	@bash scripts/build-docs.sh $(BUILD)
 
 # Benchmarks write JSON under bench/results/ (see bench/README.md).
 bench: build

@@ -212,7 +212,9 @@ void bind_io(py::module_& m)
         })
         .def("__repr__", [](const SurfaceMesh& s) { return fmt::format("Surface({} vertices, {} triangles)", s.vertices.size(), s.triangles.size()); });
     m.def("read_surface", [](const std::filesystem::path& path) { return read_surface(path); }, py::arg("path"), "Reads an STL/PLY/OBJ/VTK surface (mm).");
-    m.def("write_surface", [](const std::filesystem::path& path, const SurfaceMesh& s) { write_surface(path, s); }, py::arg("path"), py::arg("surface"));
+    m.def("write_surface", [](const std::filesystem::path& path, const SurfaceMesh& s) { write_surface(path, s); }, py::arg("path"), py::arg("surface"),
+          "Writes a surface by extension: .stl (binary), .ply (binary, per-face inside/outside labels) or .obj (groups per label pair); "
+          "positions mm, LPS; written to a temporary name and renamed when complete; physreg.Error names the file.");
     m.def("boundary_surface", [](const VolumeMesh& mesh) { return extract_boundary(mesh); }, py::arg("mesh"),
           "The outer boundary of a volume mesh as a triangle surface.");
 

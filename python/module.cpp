@@ -35,6 +35,8 @@ PYBIND11_MODULE(_physreg, m)
           "better ones (AVX-512: 'SkylakeX', AVX2: 'Haswell'); '' otherwise");
 
     static py::exception<Error> error(m, "Error", PyExc_RuntimeError);
+    error.attr("__doc__") = "Bad input (a corrupt file, wrong dimensions, an impossible parameter) or a failed solve: the message names the "
+                            "file or parameter and the reason, as the physreg program prints it. A RuntimeError.";
     py::register_exception_translator([](std::exception_ptr p) {
         try {
             if (p) std::rethrow_exception(p);

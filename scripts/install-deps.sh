@@ -2,6 +2,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 # Installs the Debian 12 packages physreg needs, if any is missing. Idempotent and quiet.
 # As root it installs them; otherwise it prints the exact apt-get line and stops.
+# `install-deps.sh docs` adds the documentation site's tools (make docs).
 set -euo pipefail
 packages=(
   cmake make g++ pkg-config
@@ -33,6 +34,12 @@ packages=(
   calculix-ccx             # tests: an independent nonlinear FE solver to compare Newton with (optional at run time)
   clang-14 libclang-rt-14-dev libomp-14-dev # fuzzing: libFuzzer, ASan/UBSan runtimes, OpenMP for clang (make fuzz)
 )
+if [ "${1:-}" = docs ]; then
+  packages+=(
+    doxygen                  # the C++ API from include/ (XML for breathe)
+    python3-sphinx python3-myst-parser python3-breathe python3-pydata-sphinx-theme # the site (make docs)
+  )
+fi
 missing=()
 for p in "${packages[@]}"; do
   [[ "$p" == \#* ]] && continue

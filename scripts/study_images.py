@@ -168,4 +168,4 @@ if not args.no_docs:
     fig.savefig(os.path.join(figures, "image_study_convergence.png"), dpi=110)
     json.dump(study, open(os.path.join(results, "image_study.json"), "w"), indent=1)
     with open(os.path.join(results, "image_study.md"), "w") as f:
-        f.write(markdown + "\n")
+        f.write("# Paper 002 study on the phantom (scripts/study_images.py)\n\n" + markdown + "\n")

@@ -175,7 +175,7 @@ if not args.no_docs:
     os.makedirs(figures, exist_ok=True)
     os.makedirs(results, exist_ok=True)
     json.dump(study, open(os.path.join(results, "surface_study.json"), "w"), indent=1)
-    open(os.path.join(results, "surface_study.md"), "w").write(markdown + "\n")
+    open(os.path.join(results, "surface_study.md"), "w").write("# Paper 001 study on the phantom (scripts/study_surface.py)\n\n" + markdown + "\n")
     colours = {"at_rest": "0.5", "rigid": "tab:orange", "icp": "tab:red", "homogeneous": "tab:blue", "homogeneous+support": "tab:green",
                "heterogeneous": "tab:purple", "heterogeneous+support": "tab:olive"}
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))

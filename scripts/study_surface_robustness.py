@@ -313,6 +313,7 @@ if not args.no_docs:
     os.makedirs(os.path.join(ROOT, "docs", "results"), exist_ok=True)
     json.dump({"seed": args.seed, "summary": summary, "cases": cases}, open(os.path.join(ROOT, "docs", "results", "surface_robustness.json"), "w"), indent=1)
     with open(os.path.join(ROOT, "docs", "results", "surface_robustness.md"), "w") as f:
+        f.write("# Partial surface: cases drawn at random (scripts/study_surface_robustness.py)\n\n")
         f.write("| case | shape | truth held | cloud | visible % | frame turned (°) | at rest (mm) | biomechanical (mm) | answer | answer (mm) | "
                 "halves: spread / motion (mm) | supports chosen | flagged | s |\n")
         f.write("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n")

@@ -5,12 +5,14 @@ Units are millimetres, pascals and newtons; positions are in ITK's physical LPS 
 numpy arrays indexed [z, y, x] (as SimpleITK's GetArrayFromImage), each with an ImageGeometry.
 
 Building blocks (C++ core, arrays without copies where the layout allows):
+
     read_labels, read_image, read_displacement_field, write_labels, write_image,
     write_displacement_field, ImageGeometry, read_mesh, write_mesh, mesh_from_labels, Mesh,
     read_surface, write_surface, boundary_surface, Surface, read_landmarks, write_landmarks,
     tre, hausdorff
 
 In memory (numpy arrays in, result objects out; no files):
+
     Model (from_labels, from_mesh; SurfaceModel.to_model) — one model for the three modes — and what is seen:
     Tool (poses), Cloud (points, labels, normals), Segmentation (label array + geometry);
     register(model, observation) → Registration (.mode, .displacement, .field(), .map_points())
@@ -32,6 +34,7 @@ In memory (numpy arrays in, result objects out; no files):
 
 The commands of the `physreg` program, run in this process with the same checks and messages,
 each returning the summary it wrote (a dict):
+
     phantom, simulate, register_compression, register_surface, register_images, evaluate,
     enrich_build, enrich_apply, run
 

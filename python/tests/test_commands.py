@@ -137,7 +137,7 @@ def test_the_example_script_runs_on_a_dataset_and_draws_its_plot(dataset, tmp_pa
     import runpy
     import os
     example = os.path.join(os.environ.get("PHYSREG_SOURCE_DIR", os.path.join(os.path.dirname(__file__), "..", "..")),
-                           "examples", "register_compression_tre.py")
+                           "examples", "01_compression.py")
     module = runpy.run_path(example)
     result, at_rest = module["main"](tmp_path, dataset, "A")
     assert (tmp_path / "tre_A.png").stat().st_size > 10_000

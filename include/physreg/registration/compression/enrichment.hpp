@@ -88,7 +88,7 @@ struct EnrichmentPlan {
 /// compression: `columns` × `rows` entry lines along `direction`, evenly over the central 70 % of
 /// the liver's extent across that direction (the tool presses over the liver), each at the
 /// position where the sphere `tool` first touches the body (non-background voxels) of
-/// `rest_labels`. Names G<column><row>. Throws Error for a tool that is not a sphere, a grid
+/// `rest_labels`. Names G, then the column, then the row. Throws Error for a tool that is not a sphere, a grid
 /// under 1 × 1, a label map without liver, or a line that misses the body.
 std::vector<EnrichmentPlan::Position> skin_grid_positions(const LabelVolume& rest_labels, const LabelRoles& roles, const Indenter& tool,
                                                           const Vec3& direction, int columns, int rows);

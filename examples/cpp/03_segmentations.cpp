@@ -3,8 +3,8 @@
 // mode): the same pipeline as `physreg register-images --fixed-labels F --moving-labels M
 // --baselines labels` and Python's physreg.register_image_pair.
 //
-//   example_register_label_pair                       a pair made here, checked (ctest runs this)
-//   example_register_label_pair FIXED MOVING [FIELD]   your two label files; FIELD: where to write the
+//   example_03_segmentations                          a pair made here, checked (ctest runs this)
+//   example_03_segmentations FIXED MOVING [FIELD]        your two label files; FIELD: where to write the
 //                                                      fixed → moving displacement field (.nii.gz)
 //
 // Outside this build tree: find_package(physreg CONFIG REQUIRED) and link physreg::physreg.

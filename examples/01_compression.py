@@ -3,7 +3,7 @@
 """Example: make a small phantom, predict one of its compressions with paper 000's heterogeneous
 model, and plot the target registration error per landmark (matplotlib).
 
-    PYTHONPATH=build/python /usr/bin/python3 examples/register_compression_tre.py WORK_DIR [DATASET STATE]
+    PYTHONPATH=build/python /usr/bin/python3 examples/01_compression.py WORK_DIR [DATASET STATE]
 
 Without DATASET it makes the small phantom in WORK_DIR/phantom (about a minute on two cores) and
 predicts its compression A. On the small preset the tool's travel barely reaches the liver of the

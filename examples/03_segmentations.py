@@ -7,7 +7,7 @@ landmarks picked in both. Here the pair is made on the spot so the example runs 
 ellipsoid gland with a lesion, and the same gland pressed from one side (flattened 15 % along y,
 widened to keep its volume) and shifted by (6, -4, 3) mm, as a probe would leave it.
 
-    PYTHONPATH=build/python /usr/bin/python3 examples/register_label_pair.py [OUT_DIR]
+    PYTHONPATH=build/python /usr/bin/python3 examples/03_segmentations.py [OUT_DIR]
 
 With files instead of arrays: `physreg.read_labels(path)` gives the same (array, geometry) pairs, and
 `physreg register-images --moving-labels M --fixed-labels F --baselines labels -o OUT` is the command.
@@ -33,6 +33,7 @@ def gland(scale_y, shift):
     return labels, geometry, lesion_centre
 
 
+# --- the registration
 moving, gm, lesion_moving = gland(1.0, np.zeros(3))
 fixed, gf, lesion_fixed = gland(0.85, np.array([6.0, -4.0, 3.0]))
 
@@ -54,7 +55,7 @@ print(f"field {field.shape} on a {geometry.spacing[0]} mm grid; largest displace
 if len(sys.argv) > 1:
     physreg.write_labels(f"{sys.argv[1]}/warped_labels.nii.gz", *result.warped_labels)
 
-# What the example promises (ctest runs it): the lesion lands within 2 mm, the gland overlaps well.
+# --- what the example promises (ctest runs it): the lesion lands within 2 mm, the gland overlaps well.
 bio = s["methods"]["biomechanical"]
 assert bio["tre"]["all"]["mean_mm"] < 2.0, bio["tre"]
 assert bio["dice"]["1"] > 0.9, bio["dice"]
