@@ -7,9 +7,11 @@ own rank or below. apps/ and python/ sit on top. A back-edge that is not in KNOW
 the check, naming the file, the line and the two layers; a listed back-edge that has gone is
 reported too, so the list only shrinks. Run: check_layers.py SOURCE_DIR (ctest layers.no_back_edges).
 
-Includes are read in both forms: "physreg/LAYER/…" and relative ones ("../detail/x.hpp"), resolved
-against the including file's folder. Two more rules:
-- a private header (under src/, e.g. src/io/detail/) is included only from its own layer;
+Includes are read in three forms: "physreg/LAYER/…", a private header by its layer's path
+("mechanics/detail/x.hpp", from src/) and relative ones ("detail/x.hpp"), resolved against the
+including file's folder. Two more rules:
+- a private header (under src/, e.g. src/io/detail/) is included only from its own layer, by its
+  layer's path, never by "../";
 - the rooms of ROOMS (sub-folders of a layer, one concept each) do not include one another: they
   share through the layer's top-level files and its detail/ folder.
 """
@@ -69,6 +71,8 @@ def resolve(root: pathlib.Path, path: pathlib.Path, text: str):
     the including file (and its folder's generated or src counterparts); None for system headers."""
     if text.startswith("physreg/"):
         return pathlib.PurePosixPath("include") / text
+    if not (path.parent / text).exists() and (root / "src" / text).exists():
+        return pathlib.PurePosixPath("src") / text  # a private header by its layer's path
     candidate = (path.parent / text).resolve()
     try:
         return pathlib.PurePosixPath(candidate.relative_to(root).as_posix())
@@ -92,6 +96,9 @@ def main(root: pathlib.Path) -> int:
             match = INCLUDE.match(line)
             if not match:
                 continue
+            if match.group(1).startswith("../") and relative.parts[0] in ("src", "include"):
+                problems.append(f"{relative}:{number}: reaches a header by '../' ({match.group(1)}): name it by its layer's path "
+                                f"(\"mechanics/detail/x.hpp\" for a private header, \"physreg/…\" for a public one)")
             included = resolve(root, path, match.group(1))
             if included is None or layer_of(included) is None:
                 continue  # a header of another library, or one of the same folder outside the layers

@@ -4,7 +4,7 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/interrupt.hpp"
 #include "physreg/core/log.hpp"
-#include "../detail/hexahedron_kernel.hpp"
+#include "mechanics/detail/hexahedron_kernel.hpp"
 
 #include <algorithm>
 #include <chrono>

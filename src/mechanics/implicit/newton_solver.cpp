@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/mechanics/implicit/newton_solver.hpp"
 
-#include "../detail/timing.hpp"
+#include "mechanics/detail/timing.hpp"
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 

@@ -4,7 +4,7 @@
 #include <omp.h>
 
 #include "physreg/core/error.hpp"
-#include "../detail/corotational_tetra_kernel.hpp"
+#include "mechanics/detail/corotational_tetra_kernel.hpp"
 
 #include <algorithm>
 #include <cmath>

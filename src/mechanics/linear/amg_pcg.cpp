@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
-#include "../detail/amg_pcg.hpp"
+#include "mechanics/detail/amg_pcg.hpp"
 
-#include "../detail/timing.hpp"
+#include "mechanics/detail/timing.hpp"
 #include "physreg/core/error.hpp"
 
 // The C API of MPI only (OpenMPI's deprecated C++ bindings would need libmpi_cxx).

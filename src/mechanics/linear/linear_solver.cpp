@@ -1,8 +1,8 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/mechanics/linear/linear_solver.hpp"
 
-#include "../detail/timing.hpp"
-#include "../detail/amg_pcg.hpp"
+#include "mechanics/detail/timing.hpp"
+#include "mechanics/detail/amg_pcg.hpp"
 
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"

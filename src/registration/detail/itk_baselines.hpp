@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
 // The narrow door to ITK's registration framework (no Eigen here: ITK 5.2 bundles its own).
-#include "../../io/detail/itk_bridge.hpp"
+#include "io/detail/itk_bridge.hpp"
 
 #include <string>
 #include <utility>

@@ -2,7 +2,7 @@
 // Paper 002's baselines: validation and conversion around the ITK translation unit.
 #include "physreg/registration/images/image_baselines.hpp"
 
-#include "../detail/itk_baselines.hpp"
+#include "registration/detail/itk_baselines.hpp"
 #include "physreg/core/error.hpp"
 
 #include <omp.h>

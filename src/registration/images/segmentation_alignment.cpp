@@ -4,7 +4,7 @@
 #include "physreg/core/error.hpp"
 #include "physreg/core/log.hpp"
 #include "physreg/image/distance_map.hpp"
-#include "../detail/principal_axes.hpp"
+#include "registration/detail/principal_axes.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>

@@ -7,7 +7,7 @@
 #include "physreg/evaluation/surface_distance.hpp"
 #include "physreg/mechanics/forms/mechanics_forms.hpp"
 #include "physreg/registration/surface/surface_model.hpp"
-#include "../detail/principal_axes.hpp"
+#include "registration/detail/principal_axes.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>
