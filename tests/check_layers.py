@@ -29,6 +29,7 @@ RANKS = {
     "evaluation": 5,
     "figures": 6, "registration": 6,  # figures draw evaluation's results; evaluation draws nothing
     "phantom": 7,       # the experiment generator: above the registration it is used to judge
+    "live": 7,          # the OpenIGTLink wire and the served session: above the registrations they serve
     "apps": 8,
     "python": 9,
 }

@@ -4,7 +4,7 @@
 // a given rate — with the answers read back and the end-to-end latency measured per answered pose
 // (send → the POINT answer carrying the pose's timestamp).
 #include "cli_support.hpp"
-#include "igtl_wire.hpp"
+#include "physreg/live/igtl_wire.hpp"
 
 #include "physreg/core/atomic_file.hpp"
 #include "physreg/core/error.hpp"
@@ -30,6 +30,8 @@
 #include <thread>
 
 namespace physreg::cli {
+using namespace live; // the OpenIGTLink wire (physreg/live/igtl_wire.hpp)
+
 namespace {
 
 struct Scheduled {

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #pragma once
-// OpenIGTLink on the wire, as serve and replay read and write it: the 58-byte header of versions 1
+// OpenIGTLink on the wire, as the live server (serve.hpp) and `physreg replay` read and write it: the 58-byte header of versions 1
 // and 2 (big-endian; version 2 adds a 12-byte extended header and metadata to the body), the body's
 // CRC-64 (the library's), and the socket helpers. Read by hand because the 1.11 library cannot
 // unpack version 2, which 3D Slicer sends; answers are packed by the library.
@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-namespace physreg::cli {
+namespace physreg::live {
 
 constexpr std::size_t igtl_header_size = 58;
 
@@ -68,4 +68,4 @@ private:
     int m_fd;
 };
 
-} // namespace physreg::cli
+} // namespace physreg::live

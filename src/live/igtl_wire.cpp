@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
-#include "igtl_wire.hpp"
+#include "physreg/live/igtl_wire.hpp"
 
 #include "physreg/core/error.hpp"
 
@@ -15,7 +15,7 @@
 #include <cmath>
 #include <cstring>
 
-namespace physreg::cli {
+namespace physreg::live {
 
 std::uint64_t read_be(const std::uint8_t* p, int bytes)
 {
@@ -249,4 +249,4 @@ LabelVolume igtl_image_labels(const IgtlMessage& m)
     return v;
 }
 
-} // namespace physreg::cli
+} // namespace physreg::live
