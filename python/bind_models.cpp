@@ -382,6 +382,7 @@ void bind_register(py::module_& m)
 
     bind_pipelines(m);
     bind_compression(m);
+    bind_live(m);
 }
 
 } // namespace

@@ -78,6 +78,7 @@ void bind_io(py::module_& m);          ///< bind_io.cpp: images, meshes, surface
 void bind_models(py::module_& m);      ///< bind_models.cpp: SurfaceModel, Model, observations, register
 void bind_pipelines(py::module_& m);   ///< bind_pipelines.cpp: papers 001 and 002 as the commands run them
 void bind_compression(py::module_& m); ///< bind_compression.cpp: paper 000 as the commands run it
+void bind_live(py::module_& m);        ///< bind_live.cpp: serve and its client (the live layer)
 
 /// An image's values as a numpy array [z, y, x] (or [z, y, x, c]) that owns the image.
 template <typename Image, typename Value>

@@ -32,6 +32,12 @@ In memory (numpy arrays in, result objects out; no files):
     calls (settings_spec('register-compression')); estimate_compression → CompressionEstimation
     (.summary, .write_parameters(path)): estimate; predict_coarse_to_fine → CoarseToFine: enrich apply.
 
+The live link (the library's live layer, as `physreg serve` runs it):
+
+    serve(model=… | dataset=…, port=… | client='HOST:PORT', …) blocks while it serves tool poses,
+    clouds and segmentations over OpenIGTLink; LiveClient('HOST:PORT') sends poses and reads the
+    answers (organ surfaces, targets) as numpy arrays in mm, LPS.
+
 The commands of the `physreg` program, run in this process with the same checks and messages,
 each returning the summary it wrote (a dict):
 
@@ -67,6 +73,7 @@ from ._physreg import (  # noqa: F401,E402
     ImageGeometry,
     ImagePair,
     ImageRegistration,
+    LiveClient,
     Mesh,
     Model,
     PartialSurfaceCase,
@@ -96,6 +103,7 @@ from ._physreg import (  # noqa: F401,E402
     register_image_pair,
     register_partial_surface,
     register_surface_cloud,
+    serve,
     settings_spec,
     tre,
     write_displacement_field,

@@ -403,6 +403,13 @@ void ServeSession::run()
             m_clients.clear();
             throw_if_interrupted();
         }
+        if (m_o.stop_requested && m_o.stop_requested()) {
+            logger()->info("serve: stopping as asked after {} updates; {} client(s) closed", m_updates, m_clients.size());
+            if (m_running.valid()) m_running.wait();
+            for (auto& c : m_clients) flush(*c);
+            m_clients.clear();
+            return;
+        }
         if (m_running.valid() && m_running.wait_for(std::chrono::seconds(0)) == std::future_status::ready) deliver_background();
         std::vector<pollfd> fds;
         if (!m_client_mode) fds.push_back({listener.get(), POLLIN, 0});

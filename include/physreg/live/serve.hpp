@@ -10,6 +10,7 @@
 #include "physreg/registration/compression/compression_registration.hpp"
 #include "physreg/registration/surface/partial_surface_registration.hpp"
 
+#include <functional>
 #include <string>
 
 namespace physreg::live {
@@ -30,6 +31,9 @@ struct ServeOptions {
     std::string record;                        ///< a file to record every message in and out (JSON lines; `physreg replay` reads it)
     double surface_cell_size = PartialSurfaceSettings{}.cell_size; ///< paper 001's liver model for clouds, mm
     bool once = false;                         ///< stop when the first client leaves (tests, scripts)
+    /// Polled about every 100 ms on the serving thread: true ends the session cleanly (clients'
+    /// queues flushed, connections closed). Python's Ctrl-C, an embedding program's shutdown.
+    std::function<bool()> stop_requested;
 };
 
 /// Error naming the option for an impossible combination (a model and a dataset, a port and a
