@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 #include "physreg/registration/surface/partial_surface_registration.hpp"
+#include "physreg/registration/surface/cloud_noise.hpp"
 #include "registration/surface/detail/partial_surface_steps.hpp"
 
 #include "physreg/core/error.hpp"
@@ -222,8 +223,9 @@ const SettingsSpec<PartialSurfaceSettings>& partial_surface_spec()
                   "where forces may act: a tracked tool's sphere centres since first contact, \"x,y,z;x,y,z;…\" (mm, LPS); the surface nodes "
                   "within --tool-radius of that path")
             .real("tool_radius", "--tool-radius", &S::tool_radius, "mm", "--tool-path: the tool sphere's radius, mm (required with it)", 0.0)
-            .real("noise", "--noise", &S::noise, "mm", "the cloud's noise σ, mm, for the discrepancy principle that picks the supports (--support auto) and the adjoint method's regularisation weight",
-                  0.0, unbounded, true)
+            .real("noise", "--noise", &S::noise, "mm", "the cloud's noise σ, mm, for the discrepancy principle that picks the supports (--support auto) "
+                  "and the adjoint method's regularisation weight; 0 (default): estimated from the cloud (quadric fits to each point's 16 nearest, "
+                  "a robust median), at least 0.5 mm", 0.0, unbounded)
             .choice("uncertainty", "--uncertainty", &S::uncertainty, {"halves", "none"},
                     "halves (default): the cloud is split at random into two halves, each registered by the biomechanical method under the chosen "
                     "supports; how far apart they place the model is the answer's precision (summary: uncertainty), and a motion smaller than 4/3 "
@@ -381,6 +383,30 @@ json uncertainty_of(const PartialSurfaceCase& c, const PartialSurfaceSettings& s
     return out;
 }
 
+/// The settings with the cloud's noise σ in place (noise 0: estimated from the cloud, at least
+/// default_noise_floor_mm), and what was decided in `report` (summary.json's "noise").
+PartialSurfaceSettings with_noise(const PartialSurfaceSettings& given, const LabelledPointCloud& cloud, json& report)
+{
+    PartialSurfaceSettings s = given;
+    if (given.noise > 0) {
+        report = {{"used_mm", given.noise}, {"source", "given (--noise)"}};
+        return s;
+    }
+    if (cloud.points.size() < 20) {
+        s.noise = default_noise_floor_mm;
+        report = {{"used_mm", s.noise}, {"source", fmt::format("the floor: {} points are too few to estimate it", cloud.points.size())}};
+        return s;
+    }
+    const CloudNoise estimate = estimate_cloud_noise(cloud.points);
+    s.noise = std::max(default_noise_floor_mm, estimate.sigma_mm);
+    report = {{"used_mm", s.noise}, {"estimated_mm", estimate.sigma_mm}, {"outlier_share", estimate.outlier_share},
+              {"source", estimate.sigma_mm > default_noise_floor_mm ? "estimated from the cloud (quadric fits to each point's 16 nearest)"
+                                                                    : fmt::format("the floor {} mm (the cloud's own estimate is below it)", default_noise_floor_mm)}};
+    logger()->info("register-surface: cloud noise estimated at {:.2f} mm ({:.0f} % outliers); the discrepancy principle works to {:.2f} mm",
+                   estimate.sigma_mm, 100.0 * estimate.outlier_share, s.noise);
+    return s;
+}
+
 } // namespace
 
 PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, const PartialSurfaceSettings& settings,
@@ -406,8 +432,10 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, c
     validate(settings, SettingNaming::option);
     if (c.mesh.cell_type != CellType::tetrahedron) fail("register-surface: the model must hold tetrahedra (paper 001's model)");
     PartialSurfaceResult result;
-    result.settings = settings;
-    const PartialSurfaceSettings& s = settings;
+    // The noise the discrepancy principle works to: as given, or estimated from the cloud.
+    json noise;
+    const PartialSurfaceSettings s = with_noise(settings, c.cloud, noise);
+    result.settings = s;
     const double E = s.young_modulus_pa();
     logger()->info("register-surface: model {} nodes, {} tetrahedra, {} surface triangles; cloud {} points", c.mesh.node_count(), c.mesh.cell_count(),
                    c.surface.triangles.size(), c.cloud.points.size());
@@ -500,6 +528,7 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, c
     summary["load_region"] = load_region_json(load, held);
     summary["determinacy"] = determined;
     summary["uncertainty"] = uncertainty;
+    summary["noise"] = noise;
     summary["predicted_error"] = predicted_error_json(evaluated, s.method, result.safeguard.answer, held.name, c.mesh, E);
     logger()->info("register-surface: {}", summary["predicted_error"]["statement"].get<std::string>());
     summary["safeguard"] = {{"flags", result.safeguard.flags}, {"notes", result.safeguard.notes}, {"requested", result.safeguard.requested},

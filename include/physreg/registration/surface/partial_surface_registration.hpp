@@ -61,7 +61,7 @@ struct PartialSurfaceSettings {
     double load_radius = 10.0;                ///< mm, around load points
     std::string tool_path;
     double tool_radius = 0.0;                 ///< mm; required with tool_path
-    double noise = 0.5;                       ///< mm, the adjoint method's discrepancy principle
+    double noise = 0.0;                       ///< mm, the discrepancy principle's σ; 0: estimated from the cloud (at least default_noise_floor_mm)
     std::string uncertainty = "halves";       ///< halves: the cloud's two random halves registered apart (precision, resolved motion); none
     double time_step = 0.1;                   ///< s
     double plateau_tolerance = 0.01;          ///< mm
@@ -125,6 +125,10 @@ struct PartialSurfaceSafeguard {
     std::string runner_up;                     ///< the best-fitting other candidate (the method asked for, a trusted rigid fit, at rest)
     double margin_mm = 0.0;                    ///< its mean cloud distance minus the answer's (negative: the runner-up fits better)
 };
+
+/// The least noise σ the discrepancy principle works to, mm: below it the model would chase its own
+/// facets (the default before the estimate, tuned on the public optimal-control liver).
+inline constexpr double default_noise_floor_mm = 0.5;
 
 /// A rigid fit turning the model by more than this is no fallback unless it explains the cloud to
 /// the noise (issue 56 item 4).
