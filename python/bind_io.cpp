@@ -109,7 +109,8 @@ VolumeMesh mesh_labels(const py::array& labels, const ImageGeometry& geometry, c
     throw py::value_error(fmt::format("kind: '{}' is not one of 'hex', 'tet'", kind));
 }
 
-void bind_io(py::module_& m)
+/// Images and displacement fields: numpy arrays [z, y, x] with their geometry.
+void bind_images(py::module_& m)
 {
     m.def("read_labels", [](const std::filesystem::path& path) {
         LabelVolume v = read_label_volume(path);
@@ -155,6 +156,11 @@ void bind_io(py::module_& m)
     }, py::arg("path"), py::arg("field"), py::arg("geometry"),
           "Writes a displacement field (float32 [z, y, x, 3], mm, LPS) that ITK, ANTs and 3D Slicer read as a transform.");
 
+}
+
+/// Meshes, surfaces, landmarks and the distances between them.
+void bind_geometry(py::module_& m)
+{
     py::class_<VolumeMesh>(m, "Mesh", "A volume mesh: nodes (N, 3) mm LPS, cells (M, 4 or 8) node ids, one tissue label per cell.")
         .def_property_readonly("nodes", [](py::object self) { return points_view(self.cast<VolumeMesh&>().nodes, self); },
                                "(N, 3) float64 node positions, mm (a view: writes change the mesh)")
@@ -261,6 +267,12 @@ void bind_io(py::module_& m)
         return d;
     }, py::arg("first"), py::arg("second"),
           "Sampled symmetric Hausdorff distance between two surfaces (vertices and triangle centroids to the exact closest point), mm.");
+}
+
+void bind_io(py::module_& m)
+{
+    bind_images(m);
+    bind_geometry(m);
 }
 
 } // namespace physreg::python

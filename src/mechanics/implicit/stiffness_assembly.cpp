@@ -147,6 +147,38 @@ void add_coupling_stiffness(const PenaltyCoupling& coupling, const std::vector<s
     }
 }
 
+/// Adds one element's tangent into the assembled values: T_a[i][k][L] = Σ_J b_aJ A_iJ,kL and
+/// K_ab[i][k] = V Σ_L T_a[i][k][L] b_bL + δ_ik k_hg G_ab (hexahedra's hourglass Gram matrix `gram`).
+/// `block` gives each node pair's slot in the pattern, `outer` each column's start. False when a
+/// value is not finite.
+inline bool add_element_stiffness(int npe, const ElementGeometry& g, const double* A, double v, const double* gram, double khg,
+                                  const std::int32_t* block, const int* outer, const std::int32_t* ids, double* values)
+{
+    bool finite = true;
+    double t[8][27];
+    for (int a = 0; a < npe; ++a)
+        for (int i = 0; i < 3; ++i)
+            for (int kl = 0; kl < 9; ++kl)
+                t[a][9 * i + kl] = g.dn_dx[3 * a] * A[9 * (3 * i) + kl] + g.dn_dx[3 * a + 1] * A[9 * (3 * i + 1) + kl] + g.dn_dx[3 * a + 2] * A[9 * (3 * i + 2) + kl];
+    for (int b = 0; b < npe; ++b) {
+        const double b0 = v * g.dn_dx[3 * b], b1 = v * g.dn_dx[3 * b + 1], b2 = v * g.dn_dx[3 * b + 2];
+        for (int a = 0; a < npe; ++a) {
+            const double hg = gram ? khg * gram[8 * a + b] : 0.0;
+            const int pos = block[a * npe + b];
+            for (int k = 0; k < 3; ++k) {
+                double* column = values + outer[3 * ids[b] + k] + 3 * pos;
+                for (int i = 0; i < 3; ++i) {
+                    const double* ta = t[a] + 9 * i + 3 * k;
+                    const double kv = ta[0] * b0 + ta[1] * b1 + ta[2] * b2 + (i == k ? hg : 0.0);
+                    finite = finite && std::isfinite(kv);
+                    column[i] += kv;
+                }
+            }
+        }
+    }
+    return finite;
+}
+
 } // namespace
 
 Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* stiffness) const
@@ -256,32 +288,8 @@ Assembly StiffnessAssembler::assemble(const double* u, double* f, SparseMatrix* 
                     element_energy[e] = energy;
                     for (int a = 0; a < npe; ++a)
                         for (int i = 0; i < 3; ++i) f[3 * ids[a] + i] += local_f[3 * a + i];
-                    if (values) {
-                        // T_a[i][k][L] = Σ_J b_aJ A_iJ,kL; K_ab[i][k] = V Σ_L T_a[i][k][L] b_bL + δ_ik k_hg G_ab.
-                        double t[8][27];
-                        for (int a = 0; a < npe; ++a)
-                            for (int i = 0; i < 3; ++i)
-                                for (int kl = 0; kl < 9; ++kl)
-                                    t[a][9 * i + kl] = g.dn_dx[3 * a] * A[9 * (3 * i) + kl] + g.dn_dx[3 * a + 1] * A[9 * (3 * i + 1) + kl] +
-                                                       g.dn_dx[3 * a + 2] * A[9 * (3 * i + 2) + kl];
-                        const std::int32_t* block = m_block.data() + e * npe * npe;
-                        for (int b = 0; b < npe; ++b) {
-                            const double b0 = v * g.dn_dx[3 * b], b1 = v * g.dn_dx[3 * b + 1], b2 = v * g.dn_dx[3 * b + 2];
-                            for (int a = 0; a < npe; ++a) {
-                                const double hg = gram ? khg * gram[8 * a + b] : 0.0;
-                                const int pos = block[a * npe + b];
-                                for (int k = 0; k < 3; ++k) {
-                                    double* column = values + m_outer[3 * ids[b] + k] + 3 * pos;
-                                    for (int i = 0; i < 3; ++i) {
-                                        const double* ta = t[a] + 9 * i + 3 * k;
-                                        const double kv = ta[0] * b0 + ta[1] * b1 + ta[2] * b2 + (i == k ? hg : 0.0);
-                                        finite = finite && std::isfinite(kv);
-                                        column[i] += kv;
-                                    }
-                                }
-                            }
-                        }
-                    }
+                    if (values)
+                        finite = add_element_stiffness(npe, g, A, v, gram, khg, m_block.data() + e * npe * npe, m_outer.data(), ids, values) && finite;
                     if (!finite && (my_non_finite < 0 || static_cast<std::int64_t>(e) < my_non_finite))
                         my_non_finite = static_cast<std::int64_t>(e);
                 }

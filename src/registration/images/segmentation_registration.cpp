@@ -496,6 +496,40 @@ int run_lbfgs(PhaseContext& context, Eigen::VectorXd& v, int iterations, double&
     return lbfgs(static_cast<int>(v.size()), v.data(), &fx, evaluate_phase, nullptr, &context, &parameters);
 }
 
+/// How much the boundary and the objective move when each estimated modulus is doubled or halved:
+/// a modulus that moves the boundary by less than a tenth of a voxel is not determined by the data.
+std::vector<ModulusSensitivity> moduli_sensitivity(LinearElasticModel& model, const SegmentationObjective& objective,
+                                                   const std::function<SegmentationGradient(const Eigen::VectorXd&)>& evaluate,
+                                                   const std::vector<std::size_t>& estimated, const Eigen::VectorXd& x,
+                                                   const std::vector<double>& moduli_pa, const Eigen::VectorXd& displacement_mm, double objective_mm2)
+{
+    std::vector<ModulusSensitivity> out;
+    for (auto j : estimated) {
+        ModulusSensitivity m;
+        m.structure = j;
+        m.voxel_mm = objective.structure_voxel_mm(j);
+        const std::vector<std::int32_t> nodes = objective.structure_term_nodes(j);
+        for (double factor : {2.0, 0.5}) {
+            std::vector<double> e = moduli_pa;
+            e[j] *= factor;
+            model.set_young_moduli(e);
+            const SegmentationGradient changed = evaluate(x);
+            double sum = 0.0;
+            for (auto n : nodes)
+                for (int c = 0; c < 3; ++c) {
+                    const double d = changed.displacement_mm[3 * n + c] - displacement_mm[3 * n + c];
+                    sum += d * d;
+                }
+            const double rms = nodes.empty() ? 0.0 : std::sqrt(sum / static_cast<double>(nodes.size()));
+            (factor > 1 ? m.boundary_change_doubled_mm : m.boundary_change_halved_mm) = rms;
+            (factor > 1 ? m.objective_change_doubled_mm2 : m.objective_change_halved_mm2) = changed.objective_mm2 - objective_mm2;
+        }
+        m.determined = std::max(m.boundary_change_doubled_mm, m.boundary_change_halved_mm) >= 0.1 * m.voxel_mm;
+        out.push_back(m);
+    }
+    return out;
+}
+
 } // namespace
 
 SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, const LinearElasticOptions& elastic,
@@ -619,29 +653,7 @@ SegmentationRegistrationResult register_segmentation(const VolumeMesh& mesh, con
     result.objective_mm2 = final_state.objective_mm2;
     result.inverted_elements = model.inverted_elements(result.displacement_mm);
     // Sensitivity of the result to each estimated modulus (two more factorisations each).
-    for (auto j : estimated) {
-        ModulusSensitivity m;
-        m.structure = j;
-        m.voxel_mm = objective.structure_voxel_mm(j);
-        const std::vector<std::int32_t> nodes = objective.structure_term_nodes(j);
-        for (double factor : {2.0, 0.5}) {
-            std::vector<double> e = result.young_moduli_pa;
-            e[j] *= factor;
-            model.set_young_moduli(e);
-            const SegmentationGradient changed = evaluate(x);
-            double sum = 0.0;
-            for (auto n : nodes)
-                for (int c = 0; c < 3; ++c) {
-                    const double d = changed.displacement_mm[3 * n + c] - result.displacement_mm[3 * n + c];
-                    sum += d * d;
-                }
-            const double rms = nodes.empty() ? 0.0 : std::sqrt(sum / static_cast<double>(nodes.size()));
-            (factor > 1 ? m.boundary_change_doubled_mm : m.boundary_change_halved_mm) = rms;
-            (factor > 1 ? m.objective_change_doubled_mm2 : m.objective_change_halved_mm2) = changed.objective_mm2 - final_state.objective_mm2;
-        }
-        m.determined = std::max(m.boundary_change_doubled_mm, m.boundary_change_halved_mm) >= 0.1 * m.voxel_mm;
-        result.sensitivity.push_back(m);
-    }
+    result.sensitivity = moduli_sensitivity(model, objective, evaluate, estimated, x, result.young_moduli_pa, result.displacement_mm, final_state.objective_mm2);
     model.set_young_moduli(result.young_moduli_pa);
     result.prior_mm2 = moduli_prior(context, result.young_moduli_pa);
     result.rms_distance_mm = objective.rms_distance_mm(result.displacement_mm);

@@ -407,6 +407,19 @@ PartialSurfaceSettings with_noise(const PartialSurfaceSettings& given, const Lab
     return s;
 }
 
+/// A load region every hypothesis holds entirely would carry no force anywhere: Error naming it.
+void require_a_free_load_node(const LoadRegion& load, const std::vector<SupportHypothesis>& hypotheses)
+{
+    if (load.nodes.empty()) return;
+    for (const auto& h : hypotheses) {
+        if (h.stiffness > 0 || h.name == "springs") return;
+        for (const auto n : load.nodes)
+            if (!std::binary_search(h.supports.nodes.begin(), h.supports.nodes.end(), n)) return;
+    }
+    fail("the load region ({} node(s), {}) lies entirely within the held supports: no node is left where a force may act", load.nodes.size(),
+         load.sources.dump());
+}
+
 } // namespace
 
 PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, const PartialSurfaceSettings& settings,
@@ -460,15 +473,7 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, c
     // 3. The supports are hypotheses (issue 46 item 3): each is registered, the most constrained one
     //    the data accept wins.
     const auto hypotheses = support_hypotheses(c, s);
-    if (!load.nodes.empty()) {
-        bool some_free = false;
-        for (const auto& h : hypotheses) {
-            if (h.stiffness > 0 || h.name == "springs") some_free = true;
-            for (const auto n : load.nodes) some_free = some_free || !std::binary_search(h.supports.nodes.begin(), h.supports.nodes.end(), n);
-        }
-        if (!some_free) fail("the load region ({} node(s), {}) lies entirely within the held supports: no node is left where a force may act",
-                             load.nodes.size(), load.sources.dump());
-    }
+    require_a_free_load_node(load, hypotheses);
     const SupportDecision decision = choose_support(c, s, hypotheses, model, matcher, options, judges, report);
     const SupportHypothesis& held = hypotheses[decision.chosen];
     const SurfaceRegistrationResult& b = decision.runs[decision.chosen];
