@@ -121,140 +121,105 @@ fs::path resolve(const fs::path& base, const std::string& file)
 
 namespace {
 
-SimulationCase read_case(const fs::path& path, const Reader& r)
+/// The case's solver section: the method and its options (each applies to the methods named).
+void read_solver(SimulationCase& c, const YAML::Node& solver, const Reader& r)
 {
-    if (!fs::exists(path)) fail_missing_file("{}: file does not exist", r.what);
-    YAML::Node root;
-    try {
-        root = YAML::LoadFile(path.string());
-    } catch (const YAML::Exception& e) {
-        fail("{}: not valid YAML: {}", r.what, e.what());
+    const std::string where = "solver";
+    r.check_keys(solver,
+                 {"method", "mode", "precision", "device", "duration_s", "ramp_time_s", "damping_per_s", "hourglass_kappa", "hourglass_modulus",
+                  "averaged_nodal_pressure", "time_step_safety", "density_scale", "time_step_s", "load_steps",
+                  "displacement_tolerance_mm", "residual_tolerance", "max_iterations", "linear", "tolerance",
+                  "penetration_tolerance_mm", "max_load_cuts", "rayleigh_mass_per_s", "rayleigh_stiffness_s", "mass", "tangent",
+                  "newton_iterations", "corotational_tangent"},
+                 where);
+    if (solver["mode"]) {
+        const auto mode = r.get<std::string>(solver["mode"], "mode", where);
+        if (mode != "static" && mode != "dynamic") fail("{}: solver.mode '{}' must be static or dynamic", r.what, mode);
+        c.method = mode == "dynamic" ? SimulationCase::Method::explicit_dynamics : SimulationCase::Method::relaxation;
     }
-    if (!root.IsMap()) fail("{}: expected a map", r.what);
-    r.check_keys(root,
-                 {"mesh", "labels", "grid", "tissues", "element", "material_law", "solver", "constraints", "forces", "indenters",
-                  "gravity_mm_s2", "output"},
-                 "the case");
-    SimulationCase c;
-    c.source = path;
-    if (root["mesh"]) c.mesh_file = resolve(path, r.get<std::string>(root["mesh"], "mesh", "the case"));
-    if (root["labels"]) c.labels_file = resolve(path, r.get<std::string>(root["labels"], "labels", "the case"));
-    if (c.mesh_file.empty() == c.labels_file.empty()) fail("{}: give exactly one of 'mesh' or 'labels'", r.what);
-    if (root["grid"]) c.grid = parse_grid_dims(r.get<std::string>(root["grid"], "grid", "the case"), r.what + ": grid");
-    if (root["tissues"]) c.tissues_file = resolve(path, r.get<std::string>(root["tissues"], "tissues", "the case"));
-    if (root["element"]) {
-        const auto e = r.get<std::string>(root["element"], "element", "the case");
-        if (e != "hexahedron" && e != "tetrahedron") fail("{}: element '{}' must be hexahedron or tetrahedron", r.what, e);
-        c.tetrahedra = e == "tetrahedron";
+    if (solver["method"]) {
+        const auto method = r.get<std::string>(solver["method"], "method", where);
+        SimulationCase::Method m;
+        if (method == "relaxation") m = SimulationCase::Method::relaxation;
+        else if (method == "newton") m = SimulationCase::Method::newton;
+        else if (method == "explicit") m = SimulationCase::Method::explicit_dynamics;
+        else if (method == "backward-euler") m = SimulationCase::Method::backward_euler;
+        else fail("{}: solver.method '{}' must be relaxation, newton, explicit or backward-euler", r.what, method);
+        if (solver["mode"] && m != c.method) fail("{}: solver.mode and solver.method disagree", r.what);
+        c.method = m;
     }
-    if (root["material_law"]) c.tled.law = parse_material_law(r.get<std::string>(root["material_law"], "material_law", "the case"));
-    if (root["gravity_mm_s2"]) c.gravity_mm_s2 = r.vec3(root["gravity_mm_s2"], "gravity_mm_s2", "the case");
+    const bool implicit_dynamics = c.method == SimulationCase::Method::backward_euler;
+    c.dynamic = c.method == SimulationCase::Method::explicit_dynamics || implicit_dynamics;
+    const bool newton = c.method == SimulationCase::Method::newton;
+    for (const char* key : {"linear", "penetration_tolerance_mm", "max_load_cuts"})
+        if (solver[key] && !newton) fail("{}: solver.{} applies to method: newton only", r.what, key);
+    if (solver["tolerance"] && !newton && !implicit_dynamics)
+        fail("{}: solver.tolerance applies to methods newton and backward-euler", r.what);
+    for (const char* key : {"rayleigh_mass_per_s", "rayleigh_stiffness_s", "mass", "tangent", "newton_iterations", "corotational_tangent"})
+        if (solver[key] && !implicit_dynamics) fail("{}: solver.{} applies to method: backward-euler only", r.what, key);
+    for (const char* key : {"damping_per_s", "density_scale", "time_step_safety", "precision", "load_steps"})
+        if (solver[key] && implicit_dynamics)
+            fail("{}: solver.{} does not apply to method: backward-euler (it takes time_step_s, rayleigh_mass_per_s, "
+                 "rayleigh_stiffness_s)",
+                 r.what, key);
+    if (implicit_dynamics) {
+        BackwardEulerOptions& be = c.backward_euler;
+        if (!solver["time_step_s"]) fail("{}: method backward-euler needs solver.time_step_s", r.what);
+        be.time_step_s = r.number(solver, "time_step_s", where);
+        be.rayleigh_mass_per_s = r.number(solver, "rayleigh_mass_per_s", where, 0.0);
+        be.rayleigh_stiffness_s = r.number(solver, "rayleigh_stiffness_s", where, 0.0);
+        if (solver["mass"]) be.mass = parse_mass_kind(r.get<std::string>(solver["mass"], "mass", where));
+        if (solver["tangent"]) be.tangent = parse_tangent_update(r.get<std::string>(solver["tangent"], "tangent", where));
+        if (solver["corotational_tangent"]) {
+            const auto t = r.get<std::string>(solver["corotational_tangent"], "corotational_tangent", where);
+            if (t != "rotated" && t != "exact") fail("{}: solver.corotational_tangent '{}' must be rotated or exact", r.what, t);
+            be.rotated_corotational_tangent = t == "rotated";
+        }
+        be.fixed_newton_iterations = static_cast<int>(r.integer(solver, "newton_iterations", where, 0.0));
+        be.residual_tolerance = r.number(solver, "tolerance", where, be.residual_tolerance);
+        be.max_newton_iterations = static_cast<int>(r.integer(solver, "max_iterations", where, be.max_newton_iterations));
+        be.validate();
+    }
+    for (const char* key : {"displacement_tolerance_mm", "residual_tolerance"})
+        if (solver[key] && newton) fail("{}: solver.{} applies to method: relaxation (newton takes 'tolerance')", r.what, key);
+    if (newton) {
+        if (solver["linear"]) c.newton.linear.kind = parse_linear_solver(r.get<std::string>(solver["linear"], "linear", where));
+        c.newton.residual_tolerance = r.number(solver, "tolerance", where, c.newton.residual_tolerance);
+        c.newton.penetration_tolerance_mm = r.number(solver, "penetration_tolerance_mm", where, c.newton.penetration_tolerance_mm);
+        c.newton.max_load_cuts = static_cast<int>(r.integer(solver, "max_load_cuts", where, c.newton.max_load_cuts));
+        c.newton.max_iterations = static_cast<int>(r.integer(solver, "max_iterations", where, c.newton.max_iterations));
+        c.newton.validate();
+    }
+    if (solver["precision"]) {
+        const auto p = r.get<std::string>(solver["precision"], "precision", where);
+        if (p != "single" && p != "double") fail("{}: solver.precision '{}' must be single or double", r.what, p);
+        c.single_precision = p == "single";
+    }
+    if (solver["device"]) c.device = parse_device(r.get<std::string>(solver["device"], "device", where));
+    c.duration_s = r.number(solver, "duration_s", where, 0.0);
+    c.ramp_time_s = r.number(solver, "ramp_time_s", where, 0.0);
+    c.tled.damping_per_s = r.number(solver, "damping_per_s", where, c.tled.damping_per_s);
+    c.tled.hourglass_kappa = r.number(solver, "hourglass_kappa", where, c.tled.hourglass_kappa);
+    if (solver["hourglass_modulus"]) {
+        const auto m = r.get<std::string>(solver["hourglass_modulus"], "hourglass_modulus", where);
+        if (m != "shear" && m != "dilatational") fail("{}: solver.hourglass_modulus '{}' must be shear or dilatational", r.what, m);
+        c.tled.hourglass_modulus = m == "shear" ? TledOptions::HourglassModulus::shear : TledOptions::HourglassModulus::dilatational;
+    }
+    if (solver["averaged_nodal_pressure"])
+        c.tled.averaged_nodal_pressure = r.get<bool>(solver["averaged_nodal_pressure"], "averaged_nodal_pressure", where);
+    c.tled.time_step_safety = r.number(solver, "time_step_safety", where, c.tled.time_step_safety);
+    c.tled.density_scale = r.number(solver, "density_scale", where, c.tled.density_scale);
+    if (solver["time_step_s"]) c.time_step_s = r.number(solver, "time_step_s", where);
+    c.load_steps = static_cast<int>(r.integer(solver, "load_steps", where, 1));
+    c.equilibrium.displacement_tolerance_mm = r.number(solver, "displacement_tolerance_mm", where, c.equilibrium.displacement_tolerance_mm);
+    c.equilibrium.residual_tolerance = r.number(solver, "residual_tolerance", where, c.equilibrium.residual_tolerance);
+    if (!newton && !implicit_dynamics)
+        c.equilibrium.max_iterations = r.integer(solver, "max_iterations", where, c.equilibrium.max_iterations, 1, 1'000'000'000'000);
+}
 
-    const YAML::Node solver = r.section(root, "solver", "the case");
-    if (solver) {
-        const std::string where = "solver";
-        r.check_keys(solver,
-                     {"method", "mode", "precision", "device", "duration_s", "ramp_time_s", "damping_per_s", "hourglass_kappa", "hourglass_modulus",
-                      "averaged_nodal_pressure", "time_step_safety", "density_scale", "time_step_s", "load_steps",
-                      "displacement_tolerance_mm", "residual_tolerance", "max_iterations", "linear", "tolerance",
-                      "penetration_tolerance_mm", "max_load_cuts", "rayleigh_mass_per_s", "rayleigh_stiffness_s", "mass", "tangent",
-                      "newton_iterations", "corotational_tangent"},
-                     where);
-        if (solver["mode"]) {
-            const auto mode = r.get<std::string>(solver["mode"], "mode", where);
-            if (mode != "static" && mode != "dynamic") fail("{}: solver.mode '{}' must be static or dynamic", r.what, mode);
-            c.method = mode == "dynamic" ? SimulationCase::Method::explicit_dynamics : SimulationCase::Method::relaxation;
-        }
-        if (solver["method"]) {
-            const auto method = r.get<std::string>(solver["method"], "method", where);
-            SimulationCase::Method m;
-            if (method == "relaxation") m = SimulationCase::Method::relaxation;
-            else if (method == "newton") m = SimulationCase::Method::newton;
-            else if (method == "explicit") m = SimulationCase::Method::explicit_dynamics;
-            else if (method == "backward-euler") m = SimulationCase::Method::backward_euler;
-            else fail("{}: solver.method '{}' must be relaxation, newton, explicit or backward-euler", r.what, method);
-            if (solver["mode"] && m != c.method) fail("{}: solver.mode and solver.method disagree", r.what);
-            c.method = m;
-        }
-        const bool implicit_dynamics = c.method == SimulationCase::Method::backward_euler;
-        c.dynamic = c.method == SimulationCase::Method::explicit_dynamics || implicit_dynamics;
-        const bool newton = c.method == SimulationCase::Method::newton;
-        for (const char* key : {"linear", "penetration_tolerance_mm", "max_load_cuts"})
-            if (solver[key] && !newton) fail("{}: solver.{} applies to method: newton only", r.what, key);
-        if (solver["tolerance"] && !newton && !implicit_dynamics)
-            fail("{}: solver.tolerance applies to methods newton and backward-euler", r.what);
-        for (const char* key : {"rayleigh_mass_per_s", "rayleigh_stiffness_s", "mass", "tangent", "newton_iterations", "corotational_tangent"})
-            if (solver[key] && !implicit_dynamics) fail("{}: solver.{} applies to method: backward-euler only", r.what, key);
-        for (const char* key : {"damping_per_s", "density_scale", "time_step_safety", "precision", "load_steps"})
-            if (solver[key] && implicit_dynamics)
-                fail("{}: solver.{} does not apply to method: backward-euler (it takes time_step_s, rayleigh_mass_per_s, "
-                     "rayleigh_stiffness_s)",
-                     r.what, key);
-        if (implicit_dynamics) {
-            BackwardEulerOptions& be = c.backward_euler;
-            if (!solver["time_step_s"]) fail("{}: method backward-euler needs solver.time_step_s", r.what);
-            be.time_step_s = r.number(solver, "time_step_s", where);
-            be.rayleigh_mass_per_s = r.number(solver, "rayleigh_mass_per_s", where, 0.0);
-            be.rayleigh_stiffness_s = r.number(solver, "rayleigh_stiffness_s", where, 0.0);
-            if (solver["mass"]) be.mass = parse_mass_kind(r.get<std::string>(solver["mass"], "mass", where));
-            if (solver["tangent"]) be.tangent = parse_tangent_update(r.get<std::string>(solver["tangent"], "tangent", where));
-            if (solver["corotational_tangent"]) {
-                const auto t = r.get<std::string>(solver["corotational_tangent"], "corotational_tangent", where);
-                if (t != "rotated" && t != "exact") fail("{}: solver.corotational_tangent '{}' must be rotated or exact", r.what, t);
-                be.rotated_corotational_tangent = t == "rotated";
-            }
-            be.fixed_newton_iterations = static_cast<int>(r.integer(solver, "newton_iterations", where, 0.0));
-            be.residual_tolerance = r.number(solver, "tolerance", where, be.residual_tolerance);
-            be.max_newton_iterations = static_cast<int>(r.integer(solver, "max_iterations", where, be.max_newton_iterations));
-            be.validate();
-        }
-        for (const char* key : {"displacement_tolerance_mm", "residual_tolerance"})
-            if (solver[key] && newton) fail("{}: solver.{} applies to method: relaxation (newton takes 'tolerance')", r.what, key);
-        if (newton) {
-            if (solver["linear"]) c.newton.linear.kind = parse_linear_solver(r.get<std::string>(solver["linear"], "linear", where));
-            c.newton.residual_tolerance = r.number(solver, "tolerance", where, c.newton.residual_tolerance);
-            c.newton.penetration_tolerance_mm = r.number(solver, "penetration_tolerance_mm", where, c.newton.penetration_tolerance_mm);
-            c.newton.max_load_cuts = static_cast<int>(r.integer(solver, "max_load_cuts", where, c.newton.max_load_cuts));
-            c.newton.max_iterations = static_cast<int>(r.integer(solver, "max_iterations", where, c.newton.max_iterations));
-            c.newton.validate();
-        }
-        if (solver["precision"]) {
-            const auto p = r.get<std::string>(solver["precision"], "precision", where);
-            if (p != "single" && p != "double") fail("{}: solver.precision '{}' must be single or double", r.what, p);
-            c.single_precision = p == "single";
-        }
-        if (solver["device"]) c.device = parse_device(r.get<std::string>(solver["device"], "device", where));
-        c.duration_s = r.number(solver, "duration_s", where, 0.0);
-        c.ramp_time_s = r.number(solver, "ramp_time_s", where, 0.0);
-        c.tled.damping_per_s = r.number(solver, "damping_per_s", where, c.tled.damping_per_s);
-        c.tled.hourglass_kappa = r.number(solver, "hourglass_kappa", where, c.tled.hourglass_kappa);
-        if (solver["hourglass_modulus"]) {
-            const auto m = r.get<std::string>(solver["hourglass_modulus"], "hourglass_modulus", where);
-            if (m != "shear" && m != "dilatational") fail("{}: solver.hourglass_modulus '{}' must be shear or dilatational", r.what, m);
-            c.tled.hourglass_modulus = m == "shear" ? TledOptions::HourglassModulus::shear : TledOptions::HourglassModulus::dilatational;
-        }
-        if (solver["averaged_nodal_pressure"])
-            c.tled.averaged_nodal_pressure = r.get<bool>(solver["averaged_nodal_pressure"], "averaged_nodal_pressure", where);
-        c.tled.time_step_safety = r.number(solver, "time_step_safety", where, c.tled.time_step_safety);
-        c.tled.density_scale = r.number(solver, "density_scale", where, c.tled.density_scale);
-        if (solver["time_step_s"]) c.time_step_s = r.number(solver, "time_step_s", where);
-        c.load_steps = static_cast<int>(r.integer(solver, "load_steps", where, 1));
-        c.equilibrium.displacement_tolerance_mm = r.number(solver, "displacement_tolerance_mm", where, c.equilibrium.displacement_tolerance_mm);
-        c.equilibrium.residual_tolerance = r.number(solver, "residual_tolerance", where, c.equilibrium.residual_tolerance);
-        if (!newton && !implicit_dynamics)
-            c.equilibrium.max_iterations = r.integer(solver, "max_iterations", where, c.equilibrium.max_iterations, 1, 1'000'000'000'000);
-    }
-    if (c.method == SimulationCase::Method::newton && c.single_precision)
-        fail("{}: solver.precision single applies to relaxation and explicit; newton runs in double precision", r.what);
-    check_device(c, r.what);
-    c.tled.validate();
-    c.equilibrium.validate();
-    if (c.dynamic && !(c.duration_s > 0)) fail("{}: a dynamic run needs solver.duration_s > 0", r.what);
-    if (c.load_steps < 1) fail("{}: solver.load_steps must be ≥ 1", r.what);
-    if (c.time_step_s && !(*c.time_step_s > 0)) fail("{}: solver.time_step_s must be > 0", r.what);
-    if (c.method == SimulationCase::Method::backward_euler) c.time_step_s.reset(); // not the explicit step
-    if (!c.gravity_mm_s2.allFinite()) fail("{}: gravity_mm_s2 is not finite", r.what);
-
+/// The case's constraints, forces and indenters.
+void read_loads(SimulationCase& c, const YAML::Node& root, const Reader& r)
+{
     std::size_t index = 0;
     for (const auto& node : r.list(root, "constraints", "the case")) {
         SimulationCase::Constraint k;
@@ -303,6 +268,50 @@ SimulationCase read_case(const fs::path& path, const Reader& r)
         i.validate();
         c.indenters.push_back(i);
     }
+}
+
+SimulationCase read_case(const fs::path& path, const Reader& r)
+{
+    if (!fs::exists(path)) fail_missing_file("{}: file does not exist", r.what);
+    YAML::Node root;
+    try {
+        root = YAML::LoadFile(path.string());
+    } catch (const YAML::Exception& e) {
+        fail("{}: not valid YAML: {}", r.what, e.what());
+    }
+    if (!root.IsMap()) fail("{}: expected a map", r.what);
+    r.check_keys(root,
+                 {"mesh", "labels", "grid", "tissues", "element", "material_law", "solver", "constraints", "forces", "indenters",
+                  "gravity_mm_s2", "output"},
+                 "the case");
+    SimulationCase c;
+    c.source = path;
+    if (root["mesh"]) c.mesh_file = resolve(path, r.get<std::string>(root["mesh"], "mesh", "the case"));
+    if (root["labels"]) c.labels_file = resolve(path, r.get<std::string>(root["labels"], "labels", "the case"));
+    if (c.mesh_file.empty() == c.labels_file.empty()) fail("{}: give exactly one of 'mesh' or 'labels'", r.what);
+    if (root["grid"]) c.grid = parse_grid_dims(r.get<std::string>(root["grid"], "grid", "the case"), r.what + ": grid");
+    if (root["tissues"]) c.tissues_file = resolve(path, r.get<std::string>(root["tissues"], "tissues", "the case"));
+    if (root["element"]) {
+        const auto e = r.get<std::string>(root["element"], "element", "the case");
+        if (e != "hexahedron" && e != "tetrahedron") fail("{}: element '{}' must be hexahedron or tetrahedron", r.what, e);
+        c.tetrahedra = e == "tetrahedron";
+    }
+    if (root["material_law"]) c.tled.law = parse_material_law(r.get<std::string>(root["material_law"], "material_law", "the case"));
+    if (root["gravity_mm_s2"]) c.gravity_mm_s2 = r.vec3(root["gravity_mm_s2"], "gravity_mm_s2", "the case");
+
+    if (const YAML::Node solver = r.section(root, "solver", "the case")) read_solver(c, solver, r);
+    if (c.method == SimulationCase::Method::newton && c.single_precision)
+        fail("{}: solver.precision single applies to relaxation and explicit; newton runs in double precision", r.what);
+    check_device(c, r.what);
+    c.tled.validate();
+    c.equilibrium.validate();
+    if (c.dynamic && !(c.duration_s > 0)) fail("{}: a dynamic run needs solver.duration_s > 0", r.what);
+    if (c.load_steps < 1) fail("{}: solver.load_steps must be ≥ 1", r.what);
+    if (c.time_step_s && !(*c.time_step_s > 0)) fail("{}: solver.time_step_s must be > 0", r.what);
+    if (c.method == SimulationCase::Method::backward_euler) c.time_step_s.reset(); // not the explicit step
+    if (!c.gravity_mm_s2.allFinite()) fail("{}: gravity_mm_s2 is not finite", r.what);
+
+    read_loads(c, root, r);
     if (c.constraints.empty() && c.indenters.empty() && c.forces.empty() && c.gravity_mm_s2.isZero()) fail("{}: no constraints, forces or indenters: nothing to simulate", r.what);
 
     const YAML::Node output = r.section(root, "output", "the case");
