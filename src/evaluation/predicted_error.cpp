@@ -59,6 +59,9 @@ nlohmann::json to_json(const PredictedError& p)
                                  springs ? springs_calibration.factor : held_calibration.factor, 100.0 * p.interval_coverage)},
             {"calibration", "the public optimal-control liver (Mestdagh & Cotin 2022), 45 frames x 3 rows; "
                             "scripts/calibrate_predicted_error.py"},
+            {"valid_when", "the cloud sees the region that moved (a push under a 500-point cloud): it measures the motion the answer "
+                           "made, not motion the cloud missed; on small patches of the project's phantom it predicted far too little "
+                           "(Spearman 0.18, median 0.0x the true error)"},
             {"statement", fmt::format("predicted mean error at interior targets {:.1f} mm ({:.0f} % interval {:.1f}-{:.1f} mm), "
                                       "from the strain energy the answer needs", p.mean_mm, 100.0 * p.interval_coverage, p.low_mm, p.high_mm)}};
 }

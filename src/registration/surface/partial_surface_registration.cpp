@@ -509,7 +509,12 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, c
     json evaluated;
     for (const auto& m : methods) evaluated[m.name] = evaluate(m, c, judges);
     const json determined = determinacy(methods, evaluated, rigid_pose_determined);
-    result.safeguard = judge_deformable_answer(evaluated, determined, rigid_pose_determined, s.method, s.safeguard, discrepancy_level_mm(s), uncertainty,
+    // The safeguard's yardstick is the noise the user stated, or the floor: an estimate raised by a
+    // rough surface (the phantom's voxel-built livers, 1.1-1.4 mm on noise-free patches) would call
+    // every small motion unresolved and write the model at rest.
+    PartialSurfaceSettings stated = s;
+    stated.noise = settings.noise > 0 ? settings.noise : default_noise_floor_mm;
+    result.safeguard = judge_deformable_answer(evaluated, determined, rigid_pose_determined, s.method, s.safeguard, discrepancy_level_mm(stated), uncertainty,
                                                model_size_mm(c.mesh));
     for (const auto& n : result.safeguard.notes) logger()->warn("register-surface: {}", n);
     if (!result.safeguard.flags.empty()) logger()->warn("register-surface: {}", result.safeguard.statement);
