@@ -16,7 +16,10 @@ configure: deps
 build: configure
 	@cmake --build $(BUILD) -j$(JOBS)
 
-demo: build
+# The demo builds what it runs only: the program and the Python package that draws report.html
+# (not the tests and benchmarks, which `make test` builds).
+demo: configure
+	@cmake --build $(BUILD) -j$(JOBS) --target physreg_cli $$(cmake --build $(BUILD) --target help | grep -qw _physreg && echo _physreg)
 	$(BUILD)/bin/physreg demo -o demo-out
 
 test: build

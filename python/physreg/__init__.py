@@ -38,8 +38,13 @@ The live link (the library's live layer, as `physreg serve` runs it):
     clouds and segmentations over OpenIGTLink; LiveClient('HOST:PORT') sends poses and reads the
     answers (organ surfaces, targets) as numpy arrays in mm, LPS.
 
-The commands of the `physreg` program, run in this process with the same checks and messages,
-each returning the summary it wrote (a dict):
+One entry point per mode (arrays in, a result out; the function the command calls):
+register_partial_surface (paper 001, register-surface), register_image_pair (paper 002,
+register-images), predict_compression (paper 000, register-compression), serve (live). Single
+methods with their own defaults are in physreg.methods (register, register_surface_cloud).
+
+The commands of the `physreg` program (physreg.commands), run in this process with the same checks
+and messages, each returning the summary it wrote (a dict):
 
     phantom, simulate, register_compression, register_surface, register_images, evaluate,
     enrich_build, enrich_apply, run
@@ -113,6 +118,7 @@ from ._physreg import (  # noqa: F401,E402
     write_mesh,
     write_surface,
 )
+from . import commands, methods  # noqa: F401,E402  (the program's commands; single methods)
 from ._commands import (  # noqa: F401,E402
     enrich_apply,
     enrich_build,

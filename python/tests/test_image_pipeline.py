@@ -196,8 +196,8 @@ def test_paper001_default_registration_is_accurate(surface_in_memory):
 
 def test_paper001_settings_are_checked(dataset):
     case = physreg.PartialSurfaceCase.from_dataset(dataset, "insufflation", visible=50, **SURFACE)
-    with pytest.raises(physreg.Error, match="noise 0 mm must be > 0"):
-        physreg.register_partial_surface(case, noise=0.0)
+    with pytest.raises(physreg.Error, match="noise -1 mm must be ≥ 0"):
+        physreg.register_partial_surface(case, noise=-1.0)  # 0: estimated from the cloud
     with pytest.raises(physreg.Error, match="unknown key 'd9'.*did you mean 'd90'"):
         physreg.register_partial_surface(case, d9=4.0)
     with pytest.raises(physreg.Error, match="tool_path '1,nan,3': a coordinate is not finite"):

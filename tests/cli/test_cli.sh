@@ -416,7 +416,7 @@ expect_error "register-surface: tool path without radius" "--tool-path needs --t
   --tool-path "1,2,3" -o "$work/rs_bad21"
 expect_error "register-surface: tool path off the model" "no surface node of the model lies within --tool-radius" "$physreg" $rs --dataset "$work/push" \
   --state push --tool-path "900,900,900;901,900,900" --tool-radius 5 -o "$work/rs_bad22"
-expect_error "register-surface: zero noise" "--noise 0 mm must be > 0" "$physreg" $rs --dataset "$work/push" --state push --method adjoint --noise 0 -o "$work/rs_bad17"
+expect_error "register-surface: negative noise" "--noise -1 mm must be ≥ 0" "$physreg" $rs --dataset "$work/push" --state push --method adjoint --noise -1 -o "$work/rs_bad17"
 expect_error "register-surface: support points off the model" "no surface node within --support-radius" "$physreg" $rs --dataset "$work/push" \
   --state push --support-points "$work/far_support.csv" -o "$work/rs_bad10"
 printf 'node\n0\n99999999\n' > "$work/bad_nodes.txt"
