@@ -19,7 +19,7 @@ build: configure
 # The demo builds what it runs only: the program and the Python package that draws report.html
 # (not the tests and benchmarks, which `make test` builds).
 demo: configure
-	@cmake --build $(BUILD) -j$(JOBS) --target physreg_cli $$(cmake --build $(BUILD) --target help | grep -qw _physreg && echo _physreg)
+	@cmake --build $(BUILD) -j$(JOBS) --target physreg_cli $$(cmake --build $(BUILD) --target help | grep -w _physreg >/dev/null && echo _physreg)
 	$(BUILD)/bin/physreg demo -o demo-out
 
 test: build
