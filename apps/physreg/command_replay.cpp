@@ -12,8 +12,6 @@
 #include "physreg/io/dataset.hpp"
 #include "physreg/registration/compression/compression_registration.hpp"
 
-#include <igtlTransformMessage.h>
-
 #include <arpa/inet.h>
 #include <netdb.h>
 #include <netinet/in.h>
@@ -86,21 +84,11 @@ std::vector<Scheduled> from_dataset(const std::string& directory, const std::str
         const Vec3 a = state.tool->path.front(), b = state.tool->path.back();
         for (int k = 0; k <= steps; ++k) {
             const Vec3 x = a + (b - a) * (double(k) / steps);
-            auto m = igtl::TransformMessage::New();
-            m->SetDeviceName(tool.c_str());
-            igtl::Matrix4x4 matrix;
-            igtl::IdentityMatrix(matrix);
-            matrix[0][3] = static_cast<float>(wire * x[0]);
-            matrix[1][3] = static_cast<float>(wire * x[1]);
-            matrix[2][3] = static_cast<float>(x[2]);
-            m->SetMatrix(matrix);
             ++index;
-            m->SetTimeStamp(index, 0); // a pose's number as its time: unique, so that answers find their pose
-            m->Pack();
-            const auto* p = static_cast<const std::uint8_t*>(m->GetPackPointer());
             Scheduled s;
             s.at_s = double(out.size()) / rate;
-            s.bytes.assign(p, p + m->GetPackSize());
+            // A pose's number as its time: unique, so that answers find their pose.
+            s.bytes = transform_message(tool, x, wire, std::uint64_t(index) << 32);
             s.timestamp = std::uint64_t(index) << 32;
             s.pose = true;
             out.push_back(std::move(s));

@@ -3,6 +3,7 @@
 
 #include "physreg/core/error.hpp"
 
+#include <igtlTransformMessage.h>
 #include <igtl_util.h>
 
 #include <poll.h>
@@ -247,6 +248,22 @@ LabelVolume igtl_image_labels(const IgtlMessage& m)
         v.labels[i] = static_cast<std::uint16_t>(value);
     }
     return v;
+}
+
+std::vector<std::uint8_t> transform_message(const std::string& device, const Vec3& position_mm, double wire, std::uint64_t timestamp)
+{
+    auto m = igtl::TransformMessage::New();
+    m->SetDeviceName(device.c_str());
+    igtl::Matrix4x4 matrix;
+    igtl::IdentityMatrix(matrix);
+    matrix[0][3] = static_cast<float>(wire * position_mm[0]);
+    matrix[1][3] = static_cast<float>(wire * position_mm[1]);
+    matrix[2][3] = static_cast<float>(position_mm[2]);
+    m->SetMatrix(matrix);
+    m->SetTimeStamp(static_cast<unsigned int>(timestamp >> 32), static_cast<unsigned int>(timestamp & 0xffffffffu));
+    m->Pack();
+    const auto* p = static_cast<const std::uint8_t*>(m->GetPackPointer());
+    return {p, p + m->GetPackSize()};
 }
 
 } // namespace physreg::live

@@ -4,8 +4,6 @@
 #include "physreg/core/error.hpp"
 #include "physreg/live/igtl_wire.hpp"
 
-#include <igtlTransformMessage.h>
-
 #include <unistd.h>
 
 #include <cmath>
@@ -30,17 +28,8 @@ std::uint64_t LiveClient::send_pose(const Vec3& position_mm, const std::string& 
     for (int d = 0; d < 3; ++d)
         if (!std::isfinite(position_mm[d])) fail("live client: the pose's coordinate {} is {} (not finite)", "xyz"[d], position_mm[d]);
     if (timestamp == 0) timestamp = std::uint64_t(++m_poses) << 32;
-    auto m = igtl::TransformMessage::New();
-    m->SetDeviceName(device.c_str());
-    igtl::Matrix4x4 matrix;
-    igtl::IdentityMatrix(matrix);
-    matrix[0][3] = static_cast<float>(m_wire * position_mm[0]);
-    matrix[1][3] = static_cast<float>(m_wire * position_mm[1]);
-    matrix[2][3] = static_cast<float>(position_mm[2]);
-    m->SetMatrix(matrix);
-    m->SetTimeStamp(static_cast<unsigned int>(timestamp >> 32), static_cast<unsigned int>(timestamp & 0xffffffffu));
-    m->Pack();
-    if (!send_all(m_fd, m->GetPackPointer(), m->GetPackSize())) fail("live client: the server closed the connection");
+    const auto bytes = transform_message(device, position_mm, m_wire, timestamp);
+    if (!send_all(m_fd, bytes.data(), bytes.size())) fail("live client: the server closed the connection");
     return timestamp;
 }
 

@@ -42,6 +42,9 @@ std::vector<Vec3> polydata_points(const IgtlMessage& m, double wire);
 /// axes scaled by the spacing. Error naming the device for other pixel types, a sub-volume, axes
 /// that are not orthonormal, or a pixel block of the wrong size.
 LabelVolume igtl_image_labels(const IgtlMessage& m);
+/// A TRANSFORM message named `device` moving to `position_mm` (LPS; `wire` −1 writes RAS), identity
+/// rotation, stamped `timestamp` (32.32 fixed point): header and body, packed by the library.
+std::vector<std::uint8_t> transform_message(const std::string& device, const Vec3& position_mm, double wire, std::uint64_t timestamp);
 /// True when more bytes wait on `fd`.
 bool more_waiting(int fd, int timeout_ms = 0);
 /// Sends all of `data`; false when the peer has gone.
