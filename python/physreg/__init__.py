@@ -119,17 +119,7 @@ from ._physreg import (  # noqa: F401,E402
     write_surface,
 )
 from . import commands, methods  # noqa: F401,E402  (the program's commands; single methods)
-from ._commands import (  # noqa: F401,E402
-    enrich_apply,
-    enrich_build,
-    evaluate,
-    phantom,
-    register_compression,
-    register_images,
-    register_surface,
-    run,
-    simulate,
-)
+from .commands import *  # noqa: F401,F403,E402  (the commands also at the top level, as in 0.1)
 
 
 def _blas_kernels_hint():
