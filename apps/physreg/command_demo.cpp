@@ -342,6 +342,168 @@ nlohmann::json demo_summary(const std::string& preset, std::uint64_t seed, const
                     {"seconds", seconds}};
 }
 
+/// The demo's models and the detail enrichment database of step 4.
+struct DemoModels {
+    LiverModel fine, coarse;
+    EnrichmentDatabase db;
+    std::vector<NodeEmbedding> embedding;
+    int blend = 0;
+    double detail_length = 0.0;
+};
+
+/// Step 4: the fitted fine model, its coarse companion and the enrichment database over the
+/// training positions A, B, C × depths (written to dir/enrichment.phe).
+DemoModels build_demo_models(const std::filesystem::path& dir, const PhantomDataset& dataset, const LabelVolume& rest_labels,
+                             const EstimationResult& fit, const std::vector<CompressionCase>& train_cases, const Index3& coarse_grid,
+                             const std::vector<double>& depths)
+{
+    namespace fs = std::filesystem;
+    DemoModels m;
+    m.fine = build_liver_model(rest_labels, dataset.roles, fit.fitted, "phantom rest labels");
+    m.coarse = coarsen_liver_model(m.fine, coarse_grid, &m.embedding);
+    EnrichmentPlan plan;
+    // Held-out evaluation: only the training compressions' tool positions go into the database.
+    // A grid over the skin (`enrich build --positions-grid`) was measured here and made
+    // coarse-to-fine worse (docs/enrichment.md): the detail of a position 10 mm away hurts.
+    for (const auto& c : train_cases)
+        plan.positions.push_back({c.name, c.tool.path.front()}), plan.direction = (c.tool.path.back() - c.tool.path.front()).normalized();
+    plan.depths_mm = depths;
+    {
+        ProgressDisplay bar("enrich build");
+        EnrichmentBuildOptions options;
+        options.checkpoint_directory = dir / "enrichment.phe.partial";
+        options.progress = [&](double f, const std::string& m) { bar.update(f, m); };
+        m.db = build_enrichment_database(m.fine, m.coarse, m.embedding, train_cases.front().tool, plan, options);
+        bar.finish();
+    }
+    write_enrichment_database(dir / "enrichment.phe", m.db);
+    fs::remove_all(dir / "enrichment.phe.partial");
+    m.blend = choose_blend_size(m.db, m.coarse.mesh, m.embedding, m.fine.mesh.nodes, 4);
+    // Paper 000's synthesis: the stored detail at any distance. A detail share chosen by leave
+    // one position out was measured here and picked the wrong way on both presets
+    // (docs/enrichment.md), so the demo keeps the paper's.
+    m.detail_length = std::numeric_limits<double>::infinity();
+    return m;
+}
+
+/// The demo's table rows and the held-out states' summaries (step 5).
+struct DemoRegistration {
+    std::vector<DemoMethod> methods;
+    nlohmann::json per_state;
+};
+
+/// Step 5: the training (A, B, C) and held-out (D, E) compressions followed in track_steps tool
+/// positions with every model of the table; the held-out states' outputs written under dir.
+DemoRegistration register_demo_compressions(const std::filesystem::path& dir, const PhantomDataset& dataset, const LabelVolume& rest_labels,
+                                            const LandmarkSet& rest_landmarks, const EstimationResult& fit, const DemoModels& models,
+                                            const std::vector<CompressionCase>& train_cases,
+                                            const std::vector<CompressionCase>& validation_cases, int track_steps, bool quick)
+{
+    using json = nlohmann::json;
+    const LiverModel& fine = models.fine;
+    const LiverModel& coarse = models.coarse;
+    const auto& embedding = models.embedding;
+    const EnrichmentDatabase& db = models.db;
+    const int blend = models.blend;
+    const double detail_length = models.detail_length;
+    ModelParameters homogeneous_parameters = fit.fitted;
+    homogeneous_parameters.variant = ModelVariant::homogeneous;
+    const LiverModel homogeneous = build_liver_model(rest_labels, dataset.roles, homogeneous_parameters, "phantom rest labels");
+    const PredictionOptions prediction;
+    std::vector<DemoMethod> methods{{"homogeneous (Han et al.)", "7.74 / 6.39 / 8.81 mm, 344.83 ms", 7.74, 6.39, 8.81, 344.83, {}, {}, {}},
+                                {"high-resolution heterogeneous", "2.22 / 2.45 / 2.04 mm, 344.83 ms", 2.22, 2.45, 2.04, 344.83, {}, {}, {}},
+                                {"coarse-to-fine", "3.42 / 3.46 / 3.38 mm, 36.76 ms", 3.42, 3.46, 3.38, 36.76, {}, {}, {}},
+                                {"rigid (noisy surface landmarks)", "-", 0, 0, 0, 0, {}, {}, {}},
+                                {"landmarks left at rest", "-", 0, 0, 0, 0, {}, {}, {}},
+                                {"condensed contact", "-", 0, 0, 0, 0, {}, {}, {}},
+                                {"condensed coarse-to-fine", "-", 0, 0, 0, 0, {}, {}, {}}};
+    json per_state;
+    std::vector<CompressionCase> all_cases = train_cases;
+    all_cases.insert(all_cases.end(), validation_cases.begin(), validation_cases.end());
+    // Condensed contact (issue 30): the high-resolution model linearised and factorised once,
+    // the compliance of the skin nodes the five tools reach and of the landmarks' nodes kept.
+    std::vector<Indenter> session_tools;
+    for (const auto& c : all_cases) session_tools.push_back(c.tool);
+    std::vector<Vec3> landmark_points;
+    for (const auto& l : rest_landmarks) landmark_points.push_back(l.position);
+    const auto query = nodes_near(fine.mesh, landmark_points, 2.0 * fine.cell_size_mm.maxCoeff());
+    CondensedContactModel condensed(fine, session_tools, query);
+    logger()->info("condensed contact: {} candidate nodes, precomputed in {:.1f} s", condensed.precomputation().candidate_nodes,
+                   condensed.precomputation().assembly_s + condensed.precomputation().factorisation_s + condensed.precomputation().compliance_s);
+    // Coarse-to-fine on top: the coarse model condensed the same way, the landmarks' fine nodes synthesised.
+    CondensedCoarseToFine condensed_c2f(fine, coarse, embedding, db, session_tools, query, EnrichmentMatching::parameters,
+                                        EnrichmentBlend(blend, detail_length));
+    ProgressDisplay bar("registration");
+    // Training states need TRE only: the high-resolution equilibria are the estimation's own at
+    // the fitted parameters (same model, tool and tolerance), the homogeneous model is solved at
+    // the final depth (three solves packed on the threads); coarse-to-fine is tracked as for
+    // D, E. Held-out states are tracked with every model for the time per update. Progress
+    // weights: measured shares of this stage on cirs057a.
+    const double homogeneous_share = 0.25, training_share = 0.03, held_out_share = (1.0 - homogeneous_share - 3 * training_share) / 2.0;
+    bar.update(0.0, "homogeneous model on the training compressions");
+    // Warm-started from the heterogeneous model's equilibria (the materials differ little, so
+    // each solve needs a fraction of the iterations from rest; same tolerance). The coupled mesh
+    // doubles the interface nodes: its field is interpolated onto the homogeneous mesh.
+    std::vector<std::vector<double>> homogeneous_warm;
+    for (const auto& u : fit.train_displacement_mm) homogeneous_warm.push_back(transfer_displacement(fine, u, homogeneous));
+    const auto homogeneous_train = evaluate_cases(homogeneous, homogeneous_parameters, rest_landmarks, train_cases, prediction,
+                                                  homogeneous_warm.size() == train_cases.size() ? &homogeneous_warm : nullptr);
+    double done_share = homogeneous_share;
+    for (std::size_t c = 0; c < all_cases.size(); ++c) {
+        const auto& vc = all_cases[c];
+        const bool held_out = c >= train_cases.size();
+        const double share = held_out ? held_out_share : training_share;
+        const TrackingRun run = track_compression(fine, coarse, embedding, db, vc.tool, rest_landmarks, track_steps, EnrichmentMatching::parameters,
+                                                  EnrichmentBlend(blend, detail_length), prediction, vc.name, [&](int s) {
+                                                      bar.update(done_share + share * 0.5 * double(s) / double(track_steps),
+                                                                 fmt::format("{} step {}", vc.name, s));
+                                                  }, /*high_resolution=*/held_out);
+        if (run.last_match.outside_range) logger()->warn("{}: outside the database's range ({}); extrapolated", vc.name, run.last_match.range_note);
+        const Vec3 a = vc.tool.path.front(), b = vc.tool.path.back();
+        // Homogeneous model: the same tracking on the held-out states.
+        std::vector<double> homogeneous_u;
+        LandmarkSet homogeneous_landmarks;
+        if (held_out) {
+            CompressionTracker plain(homogeneous, vc.tool, prediction);
+            for (int s = 1; s <= track_steps; ++s) {
+                methods[0].ms.push_back(1e3 * plain.move_to(a + (b - a) * double(s) / double(track_steps), vc.name + " (homogeneous)").seconds);
+                bar.update(done_share + share * (0.5 + 0.5 * double(s) / double(track_steps)), fmt::format("{} step {} (homogeneous)", vc.name, s));
+            }
+            homogeneous_u = plain.displacement_mm();
+            homogeneous_landmarks = move_landmarks(homogeneous, homogeneous_u, rest_landmarks);
+        }
+        done_share += share;
+        // Rigid baseline: the rigid motion that best maps the rest surface landmarks onto their noisy
+        // observed positions in this state (what a tracked pointer would give), applied to all.
+        const DatasetState& observed_state = dataset.state(vc.name);
+        const LandmarkSet observed = read_landmarks(dataset.path(observed_state.files.at("landmarks_noisy")));
+        const LandmarkSet rigid_landmarks = rigid_landmark_registration(rest_landmarks, observed, LandmarkType::surface, vc.name + " (rigid)");
+        const auto record_report = [&](DemoMethod& m, const TreReport& r) { (held_out ? m.tre : m.tre_train).push_back(r); };
+        const auto record = [&](DemoMethod& m, const LandmarkSet& predicted) { record_report(m, compute_tre(predicted, vc.truth, vc.name)); };
+        if (held_out) {
+            record(methods[0], homogeneous_landmarks);
+            record(methods[1], run.high_resolution_landmarks);
+        } else {
+            record_report(methods[0], homogeneous_train.at(c).second);
+            record_report(methods[1], fit.train.at(c).second);
+            if (fit.train.at(c).first != vc.name) fail("demo: the estimation's training reports are out of order ({} for {})", fit.train.at(c).first, vc.name);
+        }
+        record(methods[2], run.coarse_to_fine_landmarks);
+        record(methods[3], rigid_landmarks);
+        record(methods[4], rest_landmarks);
+        // Condensed contact along the same tool positions.
+        record(methods[5], move_landmarks(fine, follow_condensed(condensed, vc.tool, track_steps, held_out ? &methods[5].ms : nullptr), rest_landmarks));
+        record(methods[6], move_landmarks(fine, follow_condensed(condensed_c2f, vc.tool, track_steps, held_out ? &methods[6].ms : nullptr), rest_landmarks));
+        if (!held_out) continue; // timings, outputs and figures: the held-out compressions
+        methods[1].ms.insert(methods[1].ms.end(), run.high_resolution_ms.begin(), run.high_resolution_ms.end());
+        methods[2].ms.insert(methods[2].ms.end(), run.coarse_to_fine_ms.begin(), run.coarse_to_fine_ms.end());
+        per_state[vc.name] = write_held_out_outputs(dir, dataset, vc, fine, homogeneous, run, homogeneous_u, homogeneous_landmarks, rest_labels,
+                                                    quick ? 1.0 : 2.0);
+    }
+    bar.finish();
+    return {std::move(methods), std::move(per_state)};
+}
+
 } // namespace
 
 void add_subcommand_demo(CLI::App& app)
@@ -425,133 +587,16 @@ void add_subcommand_demo(CLI::App& app)
 
         step(4, "detail enrichment database: training positions A, B, C × depths, fine and coarse models → enrichment.phe");
         t = clock::now();
-        const LiverModel fine = build_liver_model(rest_labels, dataset.roles, fit.fitted, "phantom rest labels");
-        std::vector<NodeEmbedding> embedding;
-        const LiverModel coarse = coarsen_liver_model(fine, coarse_grid, &embedding);
-        EnrichmentPlan plan;
-        // Held-out evaluation: only the training compressions' tool positions go into the database.
-        // A grid over the skin (`enrich build --positions-grid`) was measured here and made
-        // coarse-to-fine worse (docs/enrichment.md): the detail of a position 10 mm away hurts.
-        for (const auto& c : train_cases)
-            plan.positions.push_back({c.name, c.tool.path.front()}), plan.direction = (c.tool.path.back() - c.tool.path.front()).normalized();
-        plan.depths_mm = depths;
-        EnrichmentDatabase db;
-        {
-            ProgressDisplay bar("enrich build");
-            EnrichmentBuildOptions options;
-            options.checkpoint_directory = dir / "enrichment.phe.partial";
-            options.progress = [&](double f, const std::string& m) { bar.update(f, m); };
-            db = build_enrichment_database(fine, coarse, embedding, train_cases.front().tool, plan, options);
-            bar.finish();
-        }
-        write_enrichment_database(dir / "enrichment.phe", db);
-        fs::remove_all(dir / "enrichment.phe.partial");
-        const int blend = choose_blend_size(db, coarse.mesh, embedding, fine.mesh.nodes, 4);
-        // Paper 000's synthesis: the stored detail at any distance. A detail share chosen by leave
-        // one position out was measured here and picked the wrong way on both presets
-        // (docs/enrichment.md), so the demo keeps the paper's.
-        const double detail_length = std::numeric_limits<double>::infinity();
+        const DemoModels models = build_demo_models(dir, dataset, rest_labels, fit, train_cases, coarse_grid, depths);
+        const EnrichmentDatabase& db = models.db;
         const double database_s = seconds_since(t);
         const auto database_bytes = fs::file_size(dir / "enrichment.phe");
 
         step(5, "training (A, B, C) and held-out (D, E) compressions followed in " + std::to_string(track_steps) +
                     " tool positions: homogeneous, high-resolution heterogeneous, coarse-to-fine; rigid baseline");
         t = clock::now();
-        ModelParameters homogeneous_parameters = fit.fitted;
-        homogeneous_parameters.variant = ModelVariant::homogeneous;
-        const LiverModel homogeneous = build_liver_model(rest_labels, dataset.roles, homogeneous_parameters, "phantom rest labels");
-        const PredictionOptions prediction;
-        std::vector<DemoMethod> methods{{"homogeneous (Han et al.)", "7.74 / 6.39 / 8.81 mm, 344.83 ms", 7.74, 6.39, 8.81, 344.83, {}, {}, {}},
-                                    {"high-resolution heterogeneous", "2.22 / 2.45 / 2.04 mm, 344.83 ms", 2.22, 2.45, 2.04, 344.83, {}, {}, {}},
-                                    {"coarse-to-fine", "3.42 / 3.46 / 3.38 mm, 36.76 ms", 3.42, 3.46, 3.38, 36.76, {}, {}, {}},
-                                    {"rigid (noisy surface landmarks)", "-", 0, 0, 0, 0, {}, {}, {}},
-                                    {"landmarks left at rest", "-", 0, 0, 0, 0, {}, {}, {}},
-                                    {"condensed contact", "-", 0, 0, 0, 0, {}, {}, {}},
-                                    {"condensed coarse-to-fine", "-", 0, 0, 0, 0, {}, {}, {}}};
-        json per_state;
-        std::vector<CompressionCase> all_cases = train_cases;
-        all_cases.insert(all_cases.end(), validation_cases.begin(), validation_cases.end());
-        // Condensed contact (issue 30): the high-resolution model linearised and factorised once,
-        // the compliance of the skin nodes the five tools reach and of the landmarks' nodes kept.
-        std::vector<Indenter> session_tools;
-        for (const auto& c : all_cases) session_tools.push_back(c.tool);
-        std::vector<Vec3> landmark_points;
-        for (const auto& l : rest_landmarks) landmark_points.push_back(l.position);
-        const auto query = nodes_near(fine.mesh, landmark_points, 2.0 * fine.cell_size_mm.maxCoeff());
-        CondensedContactModel condensed(fine, session_tools, query);
-        logger()->info("condensed contact: {} candidate nodes, precomputed in {:.1f} s", condensed.precomputation().candidate_nodes,
-                       condensed.precomputation().assembly_s + condensed.precomputation().factorisation_s + condensed.precomputation().compliance_s);
-        // Coarse-to-fine on top: the coarse model condensed the same way, the landmarks' fine nodes synthesised.
-        CondensedCoarseToFine condensed_c2f(fine, coarse, embedding, db, session_tools, query, EnrichmentMatching::parameters,
-                                            EnrichmentBlend(blend, detail_length));
-        ProgressDisplay bar("registration");
-        // Training states need TRE only: the high-resolution equilibria are the estimation's own at
-        // the fitted parameters (same model, tool and tolerance), the homogeneous model is solved at
-        // the final depth (three solves packed on the threads); coarse-to-fine is tracked as for
-        // D, E. Held-out states are tracked with every model for the time per update. Progress
-        // weights: measured shares of this stage on cirs057a.
-        const double homogeneous_share = 0.25, training_share = 0.03, held_out_share = (1.0 - homogeneous_share - 3 * training_share) / 2.0;
-        bar.update(0.0, "homogeneous model on the training compressions");
-        // Warm-started from the heterogeneous model's equilibria (the materials differ little, so
-        // each solve needs a fraction of the iterations from rest; same tolerance). The coupled mesh
-        // doubles the interface nodes: its field is interpolated onto the homogeneous mesh.
-        std::vector<std::vector<double>> homogeneous_warm;
-        for (const auto& u : fit.train_displacement_mm) homogeneous_warm.push_back(transfer_displacement(fine, u, homogeneous));
-        const auto homogeneous_train = evaluate_cases(homogeneous, homogeneous_parameters, rest_landmarks, train_cases, prediction,
-                                                      homogeneous_warm.size() == train_cases.size() ? &homogeneous_warm : nullptr);
-        double done_share = homogeneous_share;
-        for (std::size_t c = 0; c < all_cases.size(); ++c) {
-            const auto& vc = all_cases[c];
-            const bool held_out = c >= train_cases.size();
-            const double share = held_out ? held_out_share : training_share;
-            const TrackingRun run = track_compression(fine, coarse, embedding, db, vc.tool, rest_landmarks, track_steps, EnrichmentMatching::parameters,
-                                                      EnrichmentBlend(blend, detail_length), prediction, vc.name, [&](int s) {
-                                                          bar.update(done_share + share * 0.5 * double(s) / double(track_steps),
-                                                                     fmt::format("{} step {}", vc.name, s));
-                                                      }, /*high_resolution=*/held_out);
-            if (run.last_match.outside_range) logger()->warn("{}: outside the database's range ({}); extrapolated", vc.name, run.last_match.range_note);
-            const Vec3 a = vc.tool.path.front(), b = vc.tool.path.back();
-            // Homogeneous model: the same tracking on the held-out states.
-            std::vector<double> homogeneous_u;
-            LandmarkSet homogeneous_landmarks;
-            if (held_out) {
-                CompressionTracker plain(homogeneous, vc.tool, prediction);
-                for (int s = 1; s <= track_steps; ++s) {
-                    methods[0].ms.push_back(1e3 * plain.move_to(a + (b - a) * double(s) / double(track_steps), vc.name + " (homogeneous)").seconds);
-                    bar.update(done_share + share * (0.5 + 0.5 * double(s) / double(track_steps)), fmt::format("{} step {} (homogeneous)", vc.name, s));
-                }
-                homogeneous_u = plain.displacement_mm();
-                homogeneous_landmarks = move_landmarks(homogeneous, homogeneous_u, rest_landmarks);
-            }
-            done_share += share;
-            // Rigid baseline: the rigid motion that best maps the rest surface landmarks onto their noisy
-            // observed positions in this state (what a tracked pointer would give), applied to all.
-            const DatasetState& observed_state = dataset.state(vc.name);
-            const LandmarkSet observed = read_landmarks(dataset.path(observed_state.files.at("landmarks_noisy")));
-            const LandmarkSet rigid_landmarks = rigid_landmark_registration(rest_landmarks, observed, LandmarkType::surface, vc.name + " (rigid)");
-            const auto record_report = [&](DemoMethod& m, const TreReport& r) { (held_out ? m.tre : m.tre_train).push_back(r); };
-            const auto record = [&](DemoMethod& m, const LandmarkSet& predicted) { record_report(m, compute_tre(predicted, vc.truth, vc.name)); };
-            if (held_out) {
-                record(methods[0], homogeneous_landmarks);
-                record(methods[1], run.high_resolution_landmarks);
-            } else {
-                record_report(methods[0], homogeneous_train.at(c).second);
-                record_report(methods[1], fit.train.at(c).second);
-                if (fit.train.at(c).first != vc.name) fail("demo: the estimation's training reports are out of order ({} for {})", fit.train.at(c).first, vc.name);
-            }
-            record(methods[2], run.coarse_to_fine_landmarks);
-            record(methods[3], rigid_landmarks);
-            record(methods[4], rest_landmarks);
-            // Condensed contact along the same tool positions.
-            record(methods[5], move_landmarks(fine, follow_condensed(condensed, vc.tool, track_steps, held_out ? &methods[5].ms : nullptr), rest_landmarks));
-            record(methods[6], move_landmarks(fine, follow_condensed(condensed_c2f, vc.tool, track_steps, held_out ? &methods[6].ms : nullptr), rest_landmarks));
-            if (!held_out) continue; // timings, outputs and figures: the held-out compressions
-            methods[1].ms.insert(methods[1].ms.end(), run.high_resolution_ms.begin(), run.high_resolution_ms.end());
-            methods[2].ms.insert(methods[2].ms.end(), run.coarse_to_fine_ms.begin(), run.coarse_to_fine_ms.end());
-            per_state[vc.name] = write_held_out_outputs(dir, dataset, vc, fine, homogeneous, run, homogeneous_u, homogeneous_landmarks, rest_labels,
-                                                        o->quick ? 1.0 : 2.0);
-        }
-        bar.finish();
+        auto [methods, per_state] = register_demo_compressions(dir, dataset, rest_labels, rest_landmarks, fit, models, train_cases,
+                                                               validation_cases, track_steps, o->quick);
         const double registration_s = seconds_since(t);
 
         step(6, "TRE chart → figures/tre.png");
@@ -574,12 +619,12 @@ void add_subcommand_demo(CLI::App& app)
                             pool_tre(methods[1].tre).all.mean_mm);
         text += fmt::format("landmarks left at rest (how far D, E moved them): {:.3f} mm; enrichment database {} conditions, {:.1f} MB, blend {}, "
                             "detail length {} mm\n",
-                            pool_tre(methods[4].tre).all.mean_mm, db.conditions.size(), double(database_bytes) / 1e6, blend, detail_length);
+                            pool_tre(methods[4].tre).all.mean_mm, db.conditions.size(), double(database_bytes) / 1e6, models.blend, models.detail_length);
         text += fmt::format("time: phantom {:.0f} s{}, estimation {:.0f} s, database {:.0f} s, registration {:.0f} s; total {:.0f} s\n", phantom_s,
                             reuse ? " (reused)" : "", estimate_s, database_s, registration_s, total_s);
         text += fmt::format("outputs in '{}': registration/*.vtu (ParaView), figures/*.png, params.json, enrichment.phe, phantom/ (3D Slicer: "
                             "images, fields, landmarks)\n", target.string());
-        const json summary = demo_summary(preset, o->seed, table, fit, methods, db, database_bytes, blend, detail_length, per_state, blocks,
+        const json summary = demo_summary(preset, o->seed, table, fit, methods, db, database_bytes, models.blend, models.detail_length, per_state, blocks,
                                           {{"phantom", phantom_s}, {"phantom_reused", reuse}, {"estimation", estimate_s}, {"database", database_s},
                                            {"registration", registration_s}, {"total", total_s}});
         write_atomically(dir / "summary.json", [&](const fs::path& tmp) { std::ofstream(tmp) << summary.dump(2) << "\n"; });

@@ -87,6 +87,293 @@ inline void box_corners(const Real (&t)[8][W], Real (&v)[8][W])
     }
 }
 
+/// The lanes of one batch: gathered node values and per-element data, then F, J, P and the
+/// corner forces, each W wide (lane-major) so that every loop over the lanes vectorises.
+template <typename Real, int W, bool SharedGeometry, bool Run, bool Box>
+struct HexLanes {
+    alignas(64) Real ux[8][W], uy[8][W], uz[8][W];
+    alignas(64) Real bl[SharedGeometry ? 1 : 24][W], gl[SharedGeometry ? 1 : 32][W];
+    alignas(64) Real vol[W], khg[W], mu[W], lambda[W], kappa[W];
+    std::int32_t ids[Run ? 1 : 8][W];
+    std::int32_t base[8];
+    alignas(64) Real F[9][W], J[W], P[9][W];
+    alignas(64) Real tx[Box ? 8 : 1][W], ty[Box ? 8 : 1][W], tz[Box ? 8 : 1][W];
+    Real box_m[9] = {};
+    alignas(64) Real fx[8][W], fy[8][W], fz[8][W];
+    // The shape-function gradients and hourglass vectors of lane w (shared or per element).
+    Real b(const Real* dn_all, int k, int w) const
+    {
+        if constexpr (SharedGeometry) return dn_all[k];
+        else return bl[k][w];
+    }
+    Real gamma(const Real* gamma_all, int k, int w) const
+    {
+        if constexpr (SharedGeometry) return gamma_all[k];
+        else return gl[k][w];
+    }
+};
+
+/// Material data of every element type and material, indexed by geometry g and material m.
+template <typename Real>
+struct HexTables {
+    const Real *dn_all, *gamma_all, *volume_all, *vb2_all, *mu_all, *lambda_all, *kappa_all, *hourglass_all;
+};
+
+/// Node displacements and per-element data into the lanes. Idle lanes (count < W) repeat an
+/// element of the batch (the last; a run's first), so every lane computes finite values.
+template <typename Real, int W, bool S, bool Run, bool Box>
+[[gnu::always_inline]] inline void gather_lanes(HexLanes<Real, W, S, Run, Box>& l, const std::int32_t* elements, int count, const HexBatchData& d, const Real* u,
+                         const HexTables<Real>& t)
+{
+    if constexpr (Run) {
+        const std::int32_t* c0 = d.connectivity + 8 * static_cast<std::size_t>(elements[0]);
+        for (int a = 0; a < 8; ++a) {
+            l.base[a] = c0[a];
+            const Real* ua = u + 3 * static_cast<std::size_t>(c0[a]);
+            if (count == W) {
+#pragma omp simd
+                for (int w = 0; w < W; ++w) {
+                    l.ux[a][w] = ua[3 * w];
+                    l.uy[a][w] = ua[3 * w + 1];
+                    l.uz[a][w] = ua[3 * w + 2];
+                }
+            } else { // a row's last, shorter run
+                for (int w = 0; w < W; ++w) {
+                    const int live = w < count ? w : 0;
+                    l.ux[a][w] = ua[3 * live];
+                    l.uy[a][w] = ua[3 * live + 1];
+                    l.uz[a][w] = ua[3 * live + 2];
+                }
+            }
+        }
+    }
+    for (int w = 0; w < W; ++w) {
+        const std::int32_t e = elements[w < count ? w : (Run ? 0 : count - 1)];
+        if constexpr (!Run) {
+            const std::int32_t* c = d.connectivity + 8 * static_cast<std::size_t>(e);
+            for (int a = 0; a < 8; ++a) {
+                l.ids[a][w] = c[a];
+                const Real* ua = u + 3 * static_cast<std::size_t>(c[a]);
+                l.ux[a][w] = ua[0];
+                l.uy[a][w] = ua[1];
+                l.uz[a][w] = ua[2];
+            }
+        }
+        const int g = S ? 0 : d.geometry[e];
+        const int m = d.material[e];
+        l.vol[w] = t.volume_all[g];
+        l.khg[w] = t.hourglass_all[m] * t.vb2_all[g];
+        l.mu[w] = t.mu_all[m];
+        l.lambda[w] = t.lambda_all[m];
+        l.kappa[w] = t.kappa_all[m];
+        if constexpr (!S) {
+            for (int k = 0; k < 24; ++k) l.bl[k][w] = t.dn_all[24 * g + k];
+            for (int k = 0; k < 32; ++k) l.gl[k][w] = t.gamma_all[32 * g + k];
+        }
+    }
+}
+
+/// F = I + Σ_a u_a b_aᵀ per lane (box elements: through the Walsh–Hadamard modes), and J = det F.
+template <typename Real, int W, bool S, bool Run, bool Box>
+[[gnu::always_inline]] inline void deformation_gradient_lanes(HexLanes<Real, W, S, Run, Box>& l, const HexBatchData& d, const Real* dn_all)
+{
+    if constexpr (Box) {
+        static_assert(S, "box elements share one geometry");
+        for (int k = 0; k < 9; ++k) l.box_m[k] = static_cast<Real>(d.box_m[k]);
+        box_modes<Real, W>(l.ux, l.tx);
+        box_modes<Real, W>(l.uy, l.ty);
+        box_modes<Real, W>(l.uz, l.tz);
+        const Real* m = l.box_m;
+#pragma omp simd
+        for (int w = 0; w < W; ++w) {
+            // F_ij = δ_ij + Σ_k M_jk G_ik, G_ik = t_i[2^k] = Σ_a s_k(a) u_ai.
+            const Real g[3][3] = {{l.tx[1][w], l.tx[2][w], l.tx[4][w]}, {l.ty[1][w], l.ty[2][w], l.ty[4][w]}, {l.tz[1][w], l.tz[2][w], l.tz[4][w]}};
+            for (int i = 0; i < 3; ++i)
+                for (int j = 0; j < 3; ++j)
+                    l.F[3 * i + j][w] = Real(i == j) + m[3 * j] * g[i][0] + m[3 * j + 1] * g[i][1] + m[3 * j + 2] * g[i][2];
+        }
+    } else {
+#pragma omp simd
+        for (int w = 0; w < W; ++w) {
+            Real f0 = 1, f1 = 0, f2 = 0, f3 = 0, f4 = 1, f5 = 0, f6 = 0, f7 = 0, f8 = 1;
+            for (int a = 0; a < 8; ++a) {
+                const Real b0 = l.b(dn_all, 3 * a, w), b1 = l.b(dn_all, 3 * a + 1, w), b2 = l.b(dn_all, 3 * a + 2, w);
+                f0 += l.ux[a][w] * b0;
+                f1 += l.ux[a][w] * b1;
+                f2 += l.ux[a][w] * b2;
+                f3 += l.uy[a][w] * b0;
+                f4 += l.uy[a][w] * b1;
+                f5 += l.uy[a][w] * b2;
+                f6 += l.uz[a][w] * b0;
+                f7 += l.uz[a][w] * b1;
+                f8 += l.uz[a][w] * b2;
+            }
+            l.F[0][w] = f0; l.F[1][w] = f1; l.F[2][w] = f2;
+            l.F[3][w] = f3; l.F[4][w] = f4; l.F[5][w] = f5;
+            l.F[6][w] = f6; l.F[7][w] = f7; l.F[8][w] = f8;
+        }
+    }
+    const auto& F = l.F;
+#pragma omp simd
+    for (int w = 0; w < W; ++w)
+        l.J[w] = F[0][w] * (F[4][w] * F[8][w] - F[5][w] * F[7][w]) - F[1][w] * (F[3][w] * F[8][w] - F[5][w] * F[6][w]) +
+                 F[2][w] * (F[3][w] * F[7][w] - F[4][w] * F[6][w]);
+}
+
+/// The first Piola–Kirchhoff stress times the element volume, P V, per lane.
+template <typename Real, int W, bool S, bool Run, bool Box>
+[[gnu::always_inline]] inline void stress_lanes(HexLanes<Real, W, S, Run, Box>& l, MaterialLaw law)
+{
+    const auto& F = l.F;
+    const auto& J = l.J;
+    auto& P = l.P;
+    if (law == MaterialLaw::linear_elastic || law == MaterialLaw::corotational) {
+        for (int w = 0; w < W; ++w) {
+            Real fl[9], pl[9];
+            for (int k = 0; k < 9; ++k) fl[k] = F[k][w];
+            first_piola_kirchhoff(law, l.mu[w], l.lambda[w], l.kappa[w], fl, pl);
+            for (int k = 0; k < 9; ++k) P[k][w] = pl[k] * l.vol[w];
+        }
+        return;
+    }
+    alignas(64) Real r[W];
+    if (law == MaterialLaw::neo_hookean) inverse_cube_root<Real, W>(J, r);
+#pragma omp simd
+    for (int w = 0; w < W; ++w) {
+        const Real c0 = F[0][w] * F[0][w] + F[3][w] * F[3][w] + F[6][w] * F[6][w];
+        const Real c1 = F[1][w] * F[1][w] + F[4][w] * F[4][w] + F[7][w] * F[7][w];
+        const Real c2 = F[2][w] * F[2][w] + F[5][w] * F[5][w] + F[8][w] * F[8][w];
+        const Real c3 = F[0][w] * F[1][w] + F[3][w] * F[4][w] + F[6][w] * F[7][w];
+        const Real c4 = F[1][w] * F[2][w] + F[4][w] * F[5][w] + F[7][w] * F[8][w];
+        const Real c5 = F[0][w] * F[2][w] + F[3][w] * F[5][w] + F[6][w] * F[8][w];
+        Real s0, s1, s2, s3, s4, s5;
+        if (law == MaterialLaw::st_venant_kirchhoff) {
+            const Real tr_e = Real(0.5) * (c0 + c1 + c2 - Real(3));
+            s0 = l.lambda[w] * tr_e + l.mu[w] * (c0 - Real(1));
+            s1 = l.lambda[w] * tr_e + l.mu[w] * (c1 - Real(1));
+            s2 = l.lambda[w] * tr_e + l.mu[w] * (c2 - Real(1));
+            s3 = l.mu[w] * c3;
+            s4 = l.mu[w] * c4;
+            s5 = l.mu[w] * c5;
+        } else {
+            const Real inv_j2 = Real(1) / (J[w] * J[w]);
+            const Real mu_j = l.mu[w] * r[w] * r[w]; // μ J^(-2/3)
+            const Real a = l.kappa[w] * J[w] * (J[w] - Real(1)) - mu_j * (c0 + c1 + c2) * Real(1.0 / 3.0);
+            const Real ai = a * inv_j2; // C⁻¹ = adj(C) / J²
+            s0 = mu_j + ai * (c1 * c2 - c4 * c4);
+            s1 = mu_j + ai * (c0 * c2 - c5 * c5);
+            s2 = mu_j + ai * (c0 * c1 - c3 * c3);
+            s3 = ai * (c5 * c4 - c3 * c2);
+            s4 = ai * (c3 * c5 - c0 * c4);
+            s5 = ai * (c3 * c4 - c1 * c5);
+        }
+        const Real v = l.vol[w];
+        for (int row = 0; row < 3; ++row) {
+            const Real g0 = F[3 * row][w], g1 = F[3 * row + 1][w], g2 = F[3 * row + 2][w];
+            P[3 * row][w] = v * (g0 * s0 + g1 * s3 + g2 * s5);
+            P[3 * row + 1][w] = v * (g0 * s3 + g1 * s1 + g2 * s4);
+            P[3 * row + 2][w] = v * (g0 * s5 + g1 * s4 + g2 * s2);
+        }
+    }
+}
+
+/// Corner forces: P V b_a plus the hourglass forces k_hg Γ (Γᵀ u).
+template <typename Real, int W, bool S, bool Run, bool Box>
+[[gnu::always_inline]] inline void corner_forces_lanes(HexLanes<Real, W, S, Run, Box>& l, const Real* dn_all, const Real* gamma_all)
+{
+    const auto& P = l.P;
+    if constexpr (Box) {
+        // Mode forces: gradient modes (PM)_ik at 2^k, hourglass modes k_hg t_i at 3, 5, 6, 7 (Γ =
+        // ±p: the sign squares away), none at 0; then back to the corners.
+        alignas(64) Real ox[8][W], oy[8][W], oz[8][W];
+        const Real* m = l.box_m;
+#pragma omp simd
+        for (int w = 0; w < W; ++w) {
+            Real (*o[3])[W] = {ox, oy, oz};
+            const Real (*t[3])[W] = {l.tx, l.ty, l.tz};
+            for (int i = 0; i < 3; ++i) {
+                o[i][0][w] = 0;
+                o[i][1][w] = P[3 * i][w] * m[0] + P[3 * i + 1][w] * m[3] + P[3 * i + 2][w] * m[6];
+                o[i][2][w] = P[3 * i][w] * m[1] + P[3 * i + 1][w] * m[4] + P[3 * i + 2][w] * m[7];
+                o[i][4][w] = P[3 * i][w] * m[2] + P[3 * i + 1][w] * m[5] + P[3 * i + 2][w] * m[8];
+                o[i][3][w] = l.khg[w] * t[i][3][w];
+                o[i][5][w] = l.khg[w] * t[i][5][w];
+                o[i][6][w] = l.khg[w] * t[i][6][w];
+                o[i][7][w] = l.khg[w] * t[i][7][w];
+            }
+        }
+        box_corners<Real, W>(ox, l.fx);
+        box_corners<Real, W>(oy, l.fy);
+        box_corners<Real, W>(oz, l.fz);
+    } else {
+        alignas(64) Real qx[4][W], qy[4][W], qz[4][W];
+#pragma omp simd
+        for (int w = 0; w < W; ++w)
+            for (int m = 0; m < 4; ++m) {
+                Real sx = 0, sy = 0, sz = 0;
+                for (int a = 0; a < 8; ++a) {
+                    const Real g = l.gamma(gamma_all, 4 * a + m, w);
+                    sx += g * l.ux[a][w];
+                    sy += g * l.uy[a][w];
+                    sz += g * l.uz[a][w];
+                }
+                qx[m][w] = l.khg[w] * sx;
+                qy[m][w] = l.khg[w] * sy;
+                qz[m][w] = l.khg[w] * sz;
+            }
+#pragma omp simd
+        for (int w = 0; w < W; ++w)
+            for (int a = 0; a < 8; ++a) {
+                const Real b0 = l.b(dn_all, 3 * a, w), b1 = l.b(dn_all, 3 * a + 1, w), b2 = l.b(dn_all, 3 * a + 2, w);
+                Real x = P[0][w] * b0 + P[1][w] * b1 + P[2][w] * b2;
+                Real y = P[3][w] * b0 + P[4][w] * b1 + P[5][w] * b2;
+                Real z = P[6][w] * b0 + P[7][w] * b1 + P[8][w] * b2;
+                for (int m = 0; m < 4; ++m) {
+                    const Real g = l.gamma(gamma_all, 4 * a + m, w);
+                    x += g * qx[m][w];
+                    y += g * qy[m][w];
+                    z += g * qz[m][w];
+                }
+                l.fx[a][w] = x;
+                l.fy[a][w] = y;
+                l.fz[a][w] = z;
+            }
+    }
+}
+
+/// Adds the live lanes' corner forces into f (a run: W consecutive nodes per corner).
+template <typename Real, int W, bool S, bool Run, bool Box>
+[[gnu::always_inline]] inline void scatter_lanes(const HexLanes<Real, W, S, Run, Box>& l, int count, Real* f)
+{
+    if constexpr (Run) {
+        for (int a = 0; a < 8; ++a) {
+            Real* fa = f + 3 * static_cast<std::size_t>(l.base[a]);
+            if (count == W) {
+#pragma omp simd
+                for (int w = 0; w < W; ++w) {
+                    fa[3 * w] += l.fx[a][w];
+                    fa[3 * w + 1] += l.fy[a][w];
+                    fa[3 * w + 2] += l.fz[a][w];
+                }
+            } else {
+                for (int w = 0; w < count; ++w) {
+                    fa[3 * w] += l.fx[a][w];
+                    fa[3 * w + 1] += l.fy[a][w];
+                    fa[3 * w + 2] += l.fz[a][w];
+                }
+            }
+        }
+    } else {
+        for (int w = 0; w < count; ++w)
+            for (int a = 0; a < 8; ++a) {
+                Real* fa = f + 3 * static_cast<std::size_t>(l.ids[a][w]);
+                fa[0] += l.fx[a][w];
+                fa[1] += l.fy[a][w];
+                fa[2] += l.fz[a][w];
+            }
+    }
+}
+
 /// Adds the forces of elements[0..count) (count ≤ W) into f. Returns the index (into elements)
 /// of an element with det F ≤ 0, or -1. Run = true: the elements form a run (see above). Box =
 /// true (needs SharedGeometry): the shared geometry is a box with b_a = M s_a, M = d.box_m
@@ -97,248 +384,17 @@ inline int hexahedron_batch(const std::int32_t* elements, int count, const HexBa
                             const Real* mu_all, const Real* lambda_all, const Real* kappa_all,
                             const Real* hourglass_all, MaterialLaw law, Real* f)
 {
-    alignas(64) Real ux[8][W], uy[8][W], uz[8][W];
-    alignas(64) Real bl[SharedGeometry ? 1 : 24][W], gl[SharedGeometry ? 1 : 32][W];
-    alignas(64) Real vol[W], khg[W], mu[W], lambda[W], kappa[W];
-    std::int32_t ids[Run ? 1 : 8][W];
-    std::int32_t base[8];
-    if constexpr (Run) {
-        const std::int32_t* c0 = d.connectivity + 8 * static_cast<std::size_t>(elements[0]);
-        for (int a = 0; a < 8; ++a) {
-            base[a] = c0[a];
-            const Real* ua = u + 3 * static_cast<std::size_t>(c0[a]);
-            if (count == W) {
-#pragma omp simd
-                for (int w = 0; w < W; ++w) {
-                    ux[a][w] = ua[3 * w];
-                    uy[a][w] = ua[3 * w + 1];
-                    uz[a][w] = ua[3 * w + 2];
-                }
-            } else { // a row's last, shorter run: idle lanes repeat its first element
-                for (int w = 0; w < W; ++w) {
-                    const int live = w < count ? w : 0;
-                    ux[a][w] = ua[3 * live];
-                    uy[a][w] = ua[3 * live + 1];
-                    uz[a][w] = ua[3 * live + 2];
-                }
-            }
-        }
-    }
-    for (int w = 0; w < W; ++w) {
-        // Idle lanes repeat an element of the batch (the last; a run's first, as gathered above).
-        const std::int32_t e = elements[w < count ? w : (Run ? 0 : count - 1)];
-        if constexpr (!Run) {
-            const std::int32_t* c = d.connectivity + 8 * static_cast<std::size_t>(e);
-            for (int a = 0; a < 8; ++a) {
-                ids[a][w] = c[a];
-                const Real* ua = u + 3 * static_cast<std::size_t>(c[a]);
-                ux[a][w] = ua[0];
-                uy[a][w] = ua[1];
-                uz[a][w] = ua[2];
-            }
-        }
-        const int g = SharedGeometry ? 0 : d.geometry[e];
-        const int m = d.material[e];
-        vol[w] = volume_all[g];
-        khg[w] = hourglass_all[m] * vb2_all[g];
-        mu[w] = mu_all[m];
-        lambda[w] = lambda_all[m];
-        kappa[w] = kappa_all[m];
-        if constexpr (!SharedGeometry) {
-            for (int k = 0; k < 24; ++k) bl[k][w] = dn_all[24 * g + k];
-            for (int k = 0; k < 32; ++k) gl[k][w] = gamma_all[32 * g + k];
-        }
-    }
-    auto b = [&](int k, int w) -> Real {
-        if constexpr (SharedGeometry) return dn_all[k];
-        else return bl[k][w];
-    };
-    auto gamma = [&](int k, int w) -> Real {
-        if constexpr (SharedGeometry) return gamma_all[k];
-        else return gl[k][w];
-    };
-
-    alignas(64) Real F[9][W];
-    alignas(64) Real tx[Box ? 8 : 1][W], ty[Box ? 8 : 1][W], tz[Box ? 8 : 1][W];
-    Real box_m[9] = {};
-    if constexpr (Box) {
-        static_assert(SharedGeometry, "box elements share one geometry");
-        for (int k = 0; k < 9; ++k) box_m[k] = static_cast<Real>(d.box_m[k]);
-        box_modes<Real, W>(ux, tx);
-        box_modes<Real, W>(uy, ty);
-        box_modes<Real, W>(uz, tz);
-#pragma omp simd
-        for (int w = 0; w < W; ++w) {
-            // F_ij = δ_ij + Σ_k M_jk G_ik, G_ik = t_i[2^k] = Σ_a s_k(a) u_ai.
-            const Real g[3][3] = {{tx[1][w], tx[2][w], tx[4][w]}, {ty[1][w], ty[2][w], ty[4][w]}, {tz[1][w], tz[2][w], tz[4][w]}};
-            for (int i = 0; i < 3; ++i)
-                for (int j = 0; j < 3; ++j)
-                    F[3 * i + j][w] = Real(i == j) + box_m[3 * j] * g[i][0] + box_m[3 * j + 1] * g[i][1] + box_m[3 * j + 2] * g[i][2];
-        }
-    } else {
-#pragma omp simd
-    for (int w = 0; w < W; ++w) {
-        Real f0 = 1, f1 = 0, f2 = 0, f3 = 0, f4 = 1, f5 = 0, f6 = 0, f7 = 0, f8 = 1;
-        for (int a = 0; a < 8; ++a) {
-            const Real b0 = b(3 * a, w), b1 = b(3 * a + 1, w), b2 = b(3 * a + 2, w);
-            f0 += ux[a][w] * b0;
-            f1 += ux[a][w] * b1;
-            f2 += ux[a][w] * b2;
-            f3 += uy[a][w] * b0;
-            f4 += uy[a][w] * b1;
-            f5 += uy[a][w] * b2;
-            f6 += uz[a][w] * b0;
-            f7 += uz[a][w] * b1;
-            f8 += uz[a][w] * b2;
-        }
-        F[0][w] = f0; F[1][w] = f1; F[2][w] = f2;
-        F[3][w] = f3; F[4][w] = f4; F[5][w] = f5;
-        F[6][w] = f6; F[7][w] = f7; F[8][w] = f8;
-    }
-    }
-    alignas(64) Real J[W];
-#pragma omp simd
-    for (int w = 0; w < W; ++w)
-        J[w] = F[0][w] * (F[4][w] * F[8][w] - F[5][w] * F[7][w]) - F[1][w] * (F[3][w] * F[8][w] - F[5][w] * F[6][w]) +
-               F[2][w] * (F[3][w] * F[7][w] - F[4][w] * F[6][w]);
+    HexLanes<Real, W, SharedGeometry, Run, Box> lanes;
+    const HexTables<Real> tables{dn_all, gamma_all, volume_all, vb2_all, mu_all, lambda_all, kappa_all, hourglass_all};
+    gather_lanes(lanes, elements, count, d, u, tables);
+    deformation_gradient_lanes(lanes, d, dn_all);
     int inverted = -1;
     for (int w = 0; w < count; ++w)
-        if (!(J[w] > Real(0))) inverted = w;
+        if (!(lanes.J[w] > Real(0))) inverted = w;
     if (inverted >= 0) return inverted;
-
-    alignas(64) Real P[9][W];
-    if (law == MaterialLaw::linear_elastic || law == MaterialLaw::corotational) {
-        for (int w = 0; w < W; ++w) {
-            Real fl[9], pl[9];
-            for (int k = 0; k < 9; ++k) fl[k] = F[k][w];
-            first_piola_kirchhoff(law, mu[w], lambda[w], kappa[w], fl, pl);
-            for (int k = 0; k < 9; ++k) P[k][w] = pl[k] * vol[w];
-        }
-    } else {
-        alignas(64) Real r[W];
-        if (law == MaterialLaw::neo_hookean) inverse_cube_root<Real, W>(J, r);
-#pragma omp simd
-        for (int w = 0; w < W; ++w) {
-            const Real c0 = F[0][w] * F[0][w] + F[3][w] * F[3][w] + F[6][w] * F[6][w];
-            const Real c1 = F[1][w] * F[1][w] + F[4][w] * F[4][w] + F[7][w] * F[7][w];
-            const Real c2 = F[2][w] * F[2][w] + F[5][w] * F[5][w] + F[8][w] * F[8][w];
-            const Real c3 = F[0][w] * F[1][w] + F[3][w] * F[4][w] + F[6][w] * F[7][w];
-            const Real c4 = F[1][w] * F[2][w] + F[4][w] * F[5][w] + F[7][w] * F[8][w];
-            const Real c5 = F[0][w] * F[2][w] + F[3][w] * F[5][w] + F[6][w] * F[8][w];
-            Real s0, s1, s2, s3, s4, s5;
-            if (law == MaterialLaw::st_venant_kirchhoff) {
-                const Real tr_e = Real(0.5) * (c0 + c1 + c2 - Real(3));
-                s0 = lambda[w] * tr_e + mu[w] * (c0 - Real(1));
-                s1 = lambda[w] * tr_e + mu[w] * (c1 - Real(1));
-                s2 = lambda[w] * tr_e + mu[w] * (c2 - Real(1));
-                s3 = mu[w] * c3;
-                s4 = mu[w] * c4;
-                s5 = mu[w] * c5;
-            } else {
-                const Real inv_j2 = Real(1) / (J[w] * J[w]);
-                const Real mu_j = mu[w] * r[w] * r[w]; // μ J^(-2/3)
-                const Real a = kappa[w] * J[w] * (J[w] - Real(1)) - mu_j * (c0 + c1 + c2) * Real(1.0 / 3.0);
-                const Real ai = a * inv_j2; // C⁻¹ = adj(C) / J²
-                s0 = mu_j + ai * (c1 * c2 - c4 * c4);
-                s1 = mu_j + ai * (c0 * c2 - c5 * c5);
-                s2 = mu_j + ai * (c0 * c1 - c3 * c3);
-                s3 = ai * (c5 * c4 - c3 * c2);
-                s4 = ai * (c3 * c5 - c0 * c4);
-                s5 = ai * (c3 * c4 - c1 * c5);
-            }
-            const Real v = vol[w];
-            for (int row = 0; row < 3; ++row) {
-                const Real g0 = F[3 * row][w], g1 = F[3 * row + 1][w], g2 = F[3 * row + 2][w];
-                P[3 * row][w] = v * (g0 * s0 + g1 * s3 + g2 * s5);
-                P[3 * row + 1][w] = v * (g0 * s3 + g1 * s1 + g2 * s4);
-                P[3 * row + 2][w] = v * (g0 * s5 + g1 * s4 + g2 * s2);
-            }
-        }
-    }
-    alignas(64) Real fx[8][W], fy[8][W], fz[8][W];
-    if constexpr (Box) {
-        // Mode forces: gradient modes (PM)_ik at 2^k, hourglass modes k_hg t_i at 3, 5, 6, 7 (Γ =
-        // ±p: the sign squares away), none at 0; then back to the corners.
-        alignas(64) Real ox[8][W], oy[8][W], oz[8][W];
-#pragma omp simd
-        for (int w = 0; w < W; ++w) {
-            Real (*o[3])[W] = {ox, oy, oz};
-            Real (*t[3])[W] = {tx, ty, tz};
-            for (int i = 0; i < 3; ++i) {
-                o[i][0][w] = 0;
-                o[i][1][w] = P[3 * i][w] * box_m[0] + P[3 * i + 1][w] * box_m[3] + P[3 * i + 2][w] * box_m[6];
-                o[i][2][w] = P[3 * i][w] * box_m[1] + P[3 * i + 1][w] * box_m[4] + P[3 * i + 2][w] * box_m[7];
-                o[i][4][w] = P[3 * i][w] * box_m[2] + P[3 * i + 1][w] * box_m[5] + P[3 * i + 2][w] * box_m[8];
-                o[i][3][w] = khg[w] * t[i][3][w];
-                o[i][5][w] = khg[w] * t[i][5][w];
-                o[i][6][w] = khg[w] * t[i][6][w];
-                o[i][7][w] = khg[w] * t[i][7][w];
-            }
-        }
-        box_corners<Real, W>(ox, fx);
-        box_corners<Real, W>(oy, fy);
-        box_corners<Real, W>(oz, fz);
-    } else {
-    alignas(64) Real qx[4][W], qy[4][W], qz[4][W];
-#pragma omp simd
-    for (int w = 0; w < W; ++w)
-        for (int m = 0; m < 4; ++m) {
-            Real sx = 0, sy = 0, sz = 0;
-            for (int a = 0; a < 8; ++a) {
-                const Real g = gamma(4 * a + m, w);
-                sx += g * ux[a][w];
-                sy += g * uy[a][w];
-                sz += g * uz[a][w];
-            }
-            qx[m][w] = khg[w] * sx;
-            qy[m][w] = khg[w] * sy;
-            qz[m][w] = khg[w] * sz;
-        }
-#pragma omp simd
-    for (int w = 0; w < W; ++w)
-        for (int a = 0; a < 8; ++a) {
-            const Real b0 = b(3 * a, w), b1 = b(3 * a + 1, w), b2 = b(3 * a + 2, w);
-            Real x = P[0][w] * b0 + P[1][w] * b1 + P[2][w] * b2;
-            Real y = P[3][w] * b0 + P[4][w] * b1 + P[5][w] * b2;
-            Real z = P[6][w] * b0 + P[7][w] * b1 + P[8][w] * b2;
-            for (int m = 0; m < 4; ++m) {
-                const Real g = gamma(4 * a + m, w);
-                x += g * qx[m][w];
-                y += g * qy[m][w];
-                z += g * qz[m][w];
-            }
-            fx[a][w] = x;
-            fy[a][w] = y;
-            fz[a][w] = z;
-        }
-    }
-    if constexpr (Run) {
-        for (int a = 0; a < 8; ++a) {
-            Real* fa = f + 3 * static_cast<std::size_t>(base[a]);
-            if (count == W) {
-#pragma omp simd
-                for (int w = 0; w < W; ++w) {
-                    fa[3 * w] += fx[a][w];
-                    fa[3 * w + 1] += fy[a][w];
-                    fa[3 * w + 2] += fz[a][w];
-                }
-            } else {
-                for (int w = 0; w < count; ++w) {
-                    fa[3 * w] += fx[a][w];
-                    fa[3 * w + 1] += fy[a][w];
-                    fa[3 * w + 2] += fz[a][w];
-                }
-            }
-        }
-    } else {
-        for (int w = 0; w < count; ++w)
-            for (int a = 0; a < 8; ++a) {
-                Real* fa = f + 3 * static_cast<std::size_t>(ids[a][w]);
-                fa[0] += fx[a][w];
-                fa[1] += fy[a][w];
-                fa[2] += fz[a][w];
-            }
-    }
+    stress_lanes(lanes, law);
+    corner_forces_lanes(lanes, dn_all, gamma_all);
+    scatter_lanes(lanes, count, f);
     return -1;
 }
 
