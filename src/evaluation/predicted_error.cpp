@@ -14,10 +14,12 @@ namespace {
 // scripts/calibrate_predicted_error.py fit, over scripts/study_adjoint_liver.py's 45 frames x 3 rows
 // (2026-12-06): k is the geometric mean of TRE / s, the interval the 10th and 90th percentiles of
 // TRE / (k s). The free log-log slope was 0.94 (springs) and 1.01 (held), hence a plain factor.
+// The springs row was fitted again once the springs were graded by the distance to the cloud
+// (2026-12-06, the 45 default runs again: slope 1.07).
 struct Calibration {
     double factor, low, high;
 };
-constexpr Calibration springs_calibration{0.230, 0.656, 1.418}; // 45 runs, Spearman 0.70
+constexpr Calibration springs_calibration{0.252, 0.722, 1.583}; // 45 runs, Spearman 0.56
 constexpr Calibration held_calibration{0.104, 0.555, 1.620};    // 90 runs, Spearman 0.80
 constexpr double stated_coverage = 0.8;
 

@@ -121,6 +121,7 @@ PartialSurfaceMethod run_adjoint(const PartialSurfaceCase& c, const SurfaceMatch
     a.fixed_nodes = options.fixed_nodes;
     a.load_nodes = options.load_nodes;
     a.spring_stiffness_n_per_mm = springs_n_per_mm;
+    a.spring_grading = s.spring_grading;
     a.support_stiffness_n_per_mm = options.support_stiffness_n_per_mm;
     a.noise_mm = s.noise;
     const AdjointSurfaceResult r = register_surface_adjoint(c.mesh, matcher, c.cloud, a, progress);
@@ -136,7 +137,7 @@ PartialSurfaceMethod run_adjoint(const PartialSurfaceCase& c, const SurfaceMatch
              {"alpha_rule", fmt::format("discrepancy principle: the largest alpha whose RMS point-to-plane distance is <= {} x the noise {} mm", a.discrepancy_factor, a.noise_mm)},
              {"chosen_alpha_mm2_per_mj", r.rungs[r.chosen].alpha}, {"discrepancy_reached", r.discrepancy_reached},
              {"rungs", rungs}, {"solves", r.solves}, {"warnings", r.warnings},
-             {"supports", a.fixed_nodes.empty() ? fmt::format("none: springs to rest at every node ({} N/mm)", r.spring_stiffness_n_per_mm) : std::string("held")}}};
+             {"supports", a.fixed_nodes.empty() ? r.spring_grading > 0 ? fmt::format("none: springs to rest at every node (mean {} N/mm), graded by the distance to the cloud (exponent {})", r.spring_stiffness_n_per_mm, r.spring_grading) : fmt::format("none: springs to rest at every node ({} N/mm)", r.spring_stiffness_n_per_mm) : std::string("held")}}};
 }
 
 json model_json(const PartialSurfaceCase& c, const PartialSurfaceSettings& s, double E, const std::optional<Membrane>& capsule, const std::optional<EmbeddedBeams>& beams)
@@ -211,6 +212,10 @@ const SettingsSpec<PartialSurfaceSettings>& partial_surface_spec()
                   "0: supports held; > 0: springs of this stiffness, N/mm per node and direction, to the rest position (ligaments stretch)", 0.0)
             .real("spring_stiffness", "--spring-stiffness", &S::spring_stiffness, "N/mm",
                   "the springs hypothesis: N/mm per node and direction (0: 0.01 × E × the mean edge)", 0.0)
+            .real("spring_grading", "--spring-grading", &S::spring_grading, "",
+                  "the adjoint method under the springs hypothesis: each node's spring ∝ (its distance to the cloud / the median)^this, their "
+                  "mean kept, so the organ is tied loosely where the surface was seen and firmly far from it (a push is held away from the "
+                  "tool); 0: uniform springs", 0.0, 8.0)
             .real("support_tolerance", "--support-tolerance", &S::support_tolerance, "mm",
                   "rigid baselines: a pose that moves a support node farther than this is implausible, mm", 0.0, unbounded, true)
             .text("load_nodes", "--load-nodes", &S::load_nodes,

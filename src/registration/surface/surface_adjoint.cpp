@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <fmt/format.h>
 #include <memory>
 #include <set>
@@ -29,6 +30,8 @@ void AdjointSurfaceOptions::validate() const
     if (!(soft_spring_fraction > 0)) fail("adjoint registration: soft spring fraction {} must be > 0", soft_spring_fraction);
     if (!(support_stiffness_n_per_mm >= 0) || !std::isfinite(support_stiffness_n_per_mm))
         fail("adjoint registration: support stiffness {} N/mm must be ≥ 0 (0: held)", support_stiffness_n_per_mm);
+    if (!(spring_grading >= 0 && spring_grading <= 8))
+        fail("adjoint registration: spring grading exponent {} must lie in [0, 8] (0: uniform springs)", spring_grading);
     if (!(spring_stiffness_n_per_mm >= 0) || !std::isfinite(spring_stiffness_n_per_mm))
         fail("adjoint registration: spring stiffness {} N/mm must be ≥ 0 (0: the soft spring fraction)", spring_stiffness_n_per_mm);
     if (alpha_steps < 1 || outer_iterations < 1 || lbfgs_iterations < 1)
@@ -194,7 +197,36 @@ void pair_at(Problem& problem, const SurfaceMatcher& matcher, const LabelledPoin
     }
 }
 
-std::unique_ptr<Problem> make_problem(const VolumeMesh& mesh, const SurfaceMatcher& matcher, const AdjointSurfaceOptions& options)
+/// Weights of the springs to rest, mean 1: w_i ∝ (d_i / median d)^p with d_i the rest node's
+/// distance to the nearest cloud point (floored at a tenth of the median). Where the surface was
+/// seen to move the organ is tied loosely; far from it, where a pushed organ is held, firmly
+/// (issue 56: 4 public frames, p 1–4 measured, docs/registration.md). Brute force over the cloud,
+/// as cloud_noise.cpp: 10^3–10^4 nodes × 10^2–10^4 points, once per registration.
+std::vector<double> spring_weights_by_cloud_distance(const VolumeMesh& mesh, const std::vector<Vec3>& cloud, double exponent)
+{
+    const std::size_t n = mesh.node_count();
+    if (cloud.empty()) fail("adjoint registration: graded springs need a non-empty cloud");
+    std::vector<double> d(n);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t ii = 0; ii < static_cast<std::ptrdiff_t>(n); ++ii) {
+        const auto i = static_cast<std::size_t>(ii);
+        double best = std::numeric_limits<double>::infinity();
+        for (const auto& q : cloud) best = std::min(best, (mesh.nodes[i] - q).squaredNorm());
+        d[i] = std::sqrt(best);
+    }
+    std::vector<double> sorted = d;
+    std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(n / 2), sorted.end());
+    const double median = sorted[n / 2];
+    std::vector<double> w(n, 1.0);
+    if (!(median > 0.0)) return w; // every node on the cloud: nothing to grade by
+    double mean = 0.0;
+    for (std::size_t i = 0; i < n; ++i) mean += (w[i] = std::pow(std::max(d[i], 0.1 * median) / median, exponent));
+    mean /= static_cast<double>(n);
+    for (auto& x : w) x /= mean;
+    return w;
+}
+
+std::unique_ptr<Problem> make_problem(const VolumeMesh& mesh, const SurfaceMatcher& matcher, const AdjointSurfaceOptions& options, const LabelledPointCloud& cloud)
 {
     auto problem = std::make_unique<Problem>(mesh);
     TledOptions tled;
@@ -231,6 +263,11 @@ std::unique_ptr<Problem> make_problem(const VolumeMesh& mesh, const SurfaceMatch
                               ? options.spring_stiffness_n_per_mm
                               : options.soft_spring_fraction * options.young_modulus_pa * 1e-6 * edge / static_cast<double>(std::max<std::size_t>(1, edges));
         std::fill(problem->spring.begin(), problem->spring.end(), problem->anchor);
+        if (options.spring_grading > 0.0) {
+            const auto w = spring_weights_by_cloud_distance(mesh, cloud.points, options.spring_grading);
+            for (std::size_t i = 0; i < n; ++i)
+                for (std::size_t d = 0; d < 3; ++d) problem->spring[3 * i + d] = problem->anchor * w[i];
+        }
     }
     std::set<std::int32_t> surface;
     for (const auto& t : matcher.source().triangles) surface.insert(t.begin(), t.end());
@@ -263,7 +300,7 @@ double adjoint_surface_objective(const VolumeMesh& mesh, const SurfaceMatcher& m
                                  const std::vector<double>* linearisation_mm)
 {
     options.validate();
-    auto problem = make_problem(mesh, matcher, options);
+    auto problem = make_problem(mesh, matcher, options, cloud);
     if (linearisation_mm) {
         if (linearisation_mm->size() != 3 * mesh.node_count()) fail("adjoint objective: linearisation point of {} values", linearisation_mm->size());
         problem->linearise(Eigen::Map<const Eigen::VectorXd>(linearisation_mm->data(), static_cast<Eigen::Index>(linearisation_mm->size())));
@@ -286,7 +323,7 @@ AdjointSurfaceResult register_surface_adjoint(const VolumeMesh& mesh, const Surf
 {
     const auto start = std::chrono::steady_clock::now();
     options.validate();
-    auto problem = make_problem(mesh, matcher, options);
+    auto problem = make_problem(mesh, matcher, options, cloud);
     AdjointSurfaceResult result;
     std::vector<double> v(3 * problem->unknown_nodes.size(), 0.0), best_v = v;
     pair_at(*problem, matcher, cloud, options.matching, Eigen::VectorXd());
@@ -353,6 +390,7 @@ AdjointSurfaceResult register_surface_adjoint(const VolumeMesh& mesh, const Surf
     result.force_n.assign(problem->f.data(), problem->f.data() + problem->f.size());
     result.solves = problem->solves;
     result.spring_stiffness_n_per_mm = problem->anchor;
+    result.spring_grading = options.fixed_nodes.empty() ? options.spring_grading : 0.0;
     result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return result;
 }

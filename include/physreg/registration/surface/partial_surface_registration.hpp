@@ -52,6 +52,7 @@ struct PartialSurfaceSettings {
     std::vector<std::int32_t> support_region; ///< surface region labels held
     double support_stiffness = 0.0;           ///< N/mm; 0: held
     double spring_stiffness = 0.0;            ///< N/mm, the springs hypothesis; 0: 0.01 × E × mean edge
+    double spring_grading = 2.0;              ///< the adjoint's springs ∝ (distance to the cloud / median)^this, mean kept; 0: uniform
     double support_tolerance = 3.0;           ///< mm
     /// Where forces may act (issue 56 item 2; empty: anywhere on the surface): node ids (a file),
     /// surface nodes within load_radius of picked points (a landmark file), or of a tracked tool's

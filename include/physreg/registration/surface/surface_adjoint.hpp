@@ -36,6 +36,10 @@ struct AdjointSurfaceOptions {
     std::vector<std::int32_t> load_nodes;
     double soft_spring_fraction = 1e-4;          ///< no support: spring = this × the mean diagonal of K…
     double spring_stiffness_n_per_mm = 0.0;      ///< …or this, N/mm per node and direction, when > 0
+    /// No support: the springs graded by each node's distance d to the cloud, k_i = k (d_i / median
+    /// d)^p / mean, so their mean stays k (loose where the surface was seen, firm far from it);
+    /// 0: uniform.
+    double spring_grading = 0.0;
     double noise_mm = 0.5;                       ///< σ of the cloud, for the discrepancy principle
     double discrepancy_factor = 1.5;             ///< τ: stop at RMS distance ≤ τ σ (the model's own discretisation error adds to σ)
     int alpha_steps = 13;                        ///< α_k = α_0 · 10^(−k/2), k = 0 … steps−1
@@ -64,7 +68,8 @@ struct AdjointSurfaceResult {
     bool discrepancy_reached = false;      ///< false: the smallest α was kept (noise level never reached)
     std::vector<std::string> warnings;     ///< L-BFGS stops other than convergence, with their history
     int solves = 0;
-    double spring_stiffness_n_per_mm = 0.0; ///< the springs to rest at every node (no support), N/mm
+    double spring_stiffness_n_per_mm = 0.0; ///< the springs to rest at every node (no support), N/mm: their mean
+    double spring_grading = 0.0;            ///< their grading exponent (0: uniform, or held supports)
     double seconds = 0.0;
 };
 
