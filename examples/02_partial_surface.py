@@ -49,7 +49,7 @@ cloud = seen + rng.normal(scale=0.3, size=seen.shape)
 
 target = np.array([18.0, 38.0, 4.0])  # a lesion 17 mm under the pressed spot
 case = physreg.PartialSurfaceCase(model, cloud, landmarks={"lesion": tuple(target)}, truth={"lesion": tuple(pressed(target)[0])})
-result = physreg.register_partial_surface(case, noise=0.3)
+result = physreg.register_surface(case, noise=0.3)
 
 s = result.summary
 print(f"answer written: {s['safeguard']['answer']} ({s['safeguard']['statement']})")

@@ -40,7 +40,7 @@ fixed, gf, lesion_fixed = gland(0.85, np.array([6.0, -4.0, 3.0]))
 # None for the images: a label-to-label pair (the label baselines run, not the intensity ones).
 pair = physreg.ImagePair(None, fixed, gf, None, moving, gm,
                          landmarks_fixed={"lesion": tuple(lesion_fixed)}, landmarks_moving={"lesion": tuple(lesion_moving)})
-result = physreg.register_image_pair(pair, baselines="labels", cell_size=4.0)
+result = physreg.register_images(pair, baselines="labels", cell_size=4.0)
 
 s = result.summary
 print(f"initial alignment: {s['initial_alignment']['decision']}")

@@ -38,10 +38,13 @@ The live link (the library's live layer, as `physreg serve` runs it):
     clouds and segmentations over OpenIGTLink; LiveClient('HOST:PORT') sends poses and reads the
     answers (organ surfaces, targets) as numpy arrays in mm, LPS.
 
-One entry point per mode (arrays in, a result out; the function the command calls):
-register_partial_surface (paper 001, register-surface), register_image_pair (paper 002,
-register-images), predict_compression (paper 000, register-compression), serve (live). Single
-methods with their own defaults are in physreg.methods (register, register_surface_cloud).
+One entry point per mode, named as the command and the C++ function: register_surface (paper 001),
+register_images (paper 002), register_compression (paper 000), serve (live). Given the in-memory
+input (PartialSurfaceCase, ImagePair, CompressionSubject and CompressionCase) each registers in
+memory and returns a result object; given an output folder and the command's options it runs the
+command and returns its summary. register_partial_surface, register_image_pair and
+predict_compression are the in-memory routes under their 0.1 names. Single methods with their own
+defaults are in physreg.methods (register, register_surface_cloud).
 
 The commands of the `physreg` program (physreg.commands), run in this process with the same checks
 and messages, each returning the summary it wrote (a dict):
@@ -120,6 +123,51 @@ from ._physreg import (  # noqa: F401,E402
 )
 from . import commands, methods  # noqa: F401,E402  (the program's commands; single methods)
 from .commands import *  # noqa: F401,F403,E402  (the commands also at the top level, as in 0.1)
+
+
+# One name per mode, as the command and the C++ function are named: given the in-memory input it is
+# the mode's entry point, given an output folder (and the command's options) it is the command.
+def register_surface(*args, **kwargs):
+    """Partial-surface registration (paper 001), the mode's one entry point, named as the command.
+
+    ``register_surface(case, settings=None, progress=None, **settings)`` with a PartialSurfaceCase
+    (a SurfaceModel and the cloud's (N, 3) points, mm, LPS) registers in memory and returns a
+    PartialSurfaceRegistration (= register_partial_surface). ``register_surface(output, **options)``
+    with an output folder runs the command ``physreg register-surface`` in this process and returns
+    the summary it wrote (= commands.register_surface). The keys are settings_spec('register-surface').
+    """
+    if args and isinstance(args[0], PartialSurfaceCase):
+        return register_partial_surface(*args, **kwargs)
+    return commands.register_surface(*args, **kwargs)
+
+
+def register_images(*args, **kwargs):
+    """Segmentation-driven registration (paper 002), the mode's one entry point, named as the command.
+
+    ``register_images(pair, settings=None, progress=None, **settings)`` with an ImagePair (fixed and
+    moving images and labels, [z, y, x] arrays with their geometries) registers in memory and returns
+    an ImageRegistration (= register_image_pair). ``register_images(output, **options)`` runs the
+    command ``physreg register-images`` in this process and returns its summary
+    (= commands.register_images). The keys are settings_spec('register-images').
+    """
+    if args and isinstance(args[0], ImagePair):
+        return register_image_pair(*args, **kwargs)
+    return commands.register_images(*args, **kwargs)
+
+
+def register_compression(*args, **kwargs):
+    """Tool-compression registration (paper 000), the mode's one entry point, named as the command.
+
+    ``register_compression(subject, case, settings=None, progress=None, **settings)`` with a
+    CompressionSubject (the body at rest and its hexahedral model) and a CompressionCase (the tracked
+    tool, mm, LPS) predicts in memory and returns a CompressionRegistration (= predict_compression).
+    ``register_compression(output, **options)`` runs the command ``physreg register-compression`` in
+    this process and returns its summary (= commands.register_compression). The keys are
+    settings_spec('register-compression').
+    """
+    if args and isinstance(args[0], CompressionSubject):
+        return predict_compression(*args, **kwargs)
+    return commands.register_compression(*args, **kwargs)
 
 
 def _blas_kernels_hint():

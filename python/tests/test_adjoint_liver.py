@@ -52,7 +52,8 @@ def test_the_trap_a_turned_rest_shape_is_never_the_answer(frame):
     distance to the cloud, 2026-12-06; rigid 16.2 mm; the peer, told the supports and the force
     patch, 0.55 mm)."""
     case = physreg.PartialSurfaceCase(frame["model"], frame["cloud"], landmarks=frame["landmarks"], truth=frame["truth"])
-    r = physreg.register_partial_surface(case, uncertainty="none")
+    r = physreg.register_surface(case, uncertainty="none")  # the mode's one name: in memory, given a case
+    assert isinstance(r, physreg.PartialSurfaceRegistration)
     s, guard = r.summary, r.summary["safeguard"]
     rigid, rest = s["methods"]["rigid"], s["methods"]["at_rest"]
     # The trap is there: a large pose that fits the cloud better than the answer and than rest…

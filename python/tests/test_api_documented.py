@@ -39,6 +39,7 @@ def test_the_public_classes_document_their_methods():
 
 
 def test_the_mode_entry_points_say_their_units():
-    for f in (physreg.register_partial_surface, physreg.register_image_pair, physreg.predict_compression):
+    for f in (physreg.register_surface, physreg.register_images, physreg.register_compression, physreg.register_partial_surface,
+              physreg.register_image_pair, physreg.predict_compression):
         text = f.__doc__ or ""
         assert "mm" in text or "settings_spec" in text or "physreg register-" in text, f.__name__

@@ -73,7 +73,8 @@ def test_a_tool_from_python_with_its_truth(dataset, subject):
     names, positions = physreg.read_landmarks(dataset / state["files"]["landmarks"])[:2]
     truth = {n: tuple(p) for n, p in zip(names, positions)}
     case = physreg.CompressionCase(physreg.Tool(path, tool["radius_mm"]), truth=truth, name="A")
-    r = physreg.predict_compression(subject, case)
+    r = physreg.register_compression(subject, case)  # the mode's one name: in memory, given the subject
+    assert isinstance(r, physreg.CompressionRegistration)
     reference = physreg.predict_compression(subject, physreg.CompressionCase.from_dataset(dataset, "A"))
     assert r.summary["tre_against_dataset"]["all"]["mean_mm"] == pytest.approx(reference.summary["tre_against_dataset"]["all"]["mean_mm"], abs=1e-6)
 

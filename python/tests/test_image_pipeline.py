@@ -33,7 +33,9 @@ def through_the_command(push, tmp_path_factory):
 def in_memory(push):
     pair = physreg.ImagePair.from_dataset(push, "push")
     assert pair.has_landmarks
-    return physreg.register_image_pair(pair, **SMALL)
+    r = physreg.register_images(pair, **SMALL)  # the mode's one name: in memory, given an ImagePair
+    assert isinstance(r, physreg.ImageRegistration)
+    return r
 
 
 def test_python_and_the_command_give_the_same_field(through_the_command, in_memory):
