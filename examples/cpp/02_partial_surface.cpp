@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 // Register an organ model to a partial intra-operative surface with the C++ library (paper 001's
 // mode): the same pipeline as `physreg register-surface --labels L --cloud C` and Python's
-// physreg.register_partial_surface (examples/02_partial_surface.py makes the same organ and push).
+// physreg.register_surface (examples/02_partial_surface.py makes the same organ and push).
 //
 //   example_02_partial_surface      an organ and a pushed cloud made here, checked (ctest runs this)
 //
@@ -77,7 +77,7 @@ int main()
 
         physreg::PartialSurfaceSettings settings; // the command's defaults
         settings.noise = 0.3;                     // mm: the cloud's noise
-        const physreg::PartialSurfaceResult r = physreg::register_partial_surface(c, settings);
+        const physreg::PartialSurfaceResult r = physreg::register_surface(c, settings);
 
         const auto& s = r.summary;
         std::printf("answer written: %s\n", r.safeguard.answer.c_str());

@@ -179,6 +179,14 @@ bool motion_resolved_by_halves(double spread_mm, double motion_mm);
 PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& c, const PartialSurfaceSettings& settings,
                                               const std::function<void(double, const std::string&)>& progress = {});
 
+/// The mode's entry point under the command's name (register-surface), as register_images and
+/// register_compression are named: the same pipeline as register_partial_surface.
+inline PartialSurfaceResult register_surface(const PartialSurfaceCase& c, const PartialSurfaceSettings& settings,
+                                             const std::function<void(double, const std::string&)>& progress = {})
+{
+    return register_partial_surface(c, settings, progress);
+}
+
 /// A case from files as register-surface takes them: exactly one model source (a label volume, a
 /// closed surface or a tetrahedral mesh), its regions (a labelled surface or picked seeds), the
 /// cloud, targets, truth, vessels and supports. Empty paths are left out; `notch_x_mm` places the
