@@ -127,7 +127,8 @@ PartialSurfaceMethod run_adjoint(const PartialSurfaceCase& c, const SurfaceMatch
     const AdjointSurfaceResult r = register_surface_adjoint(c.mesh, matcher, c.cloud, a, progress);
     json rungs = json::array();
     for (const auto& g : r.rungs)
-        rungs.push_back({{"alpha_mm2_per_mj", g.alpha}, {"rms_distance_mm", g.rms_distance_mm}, {"strain_energy_mj", g.strain_energy_mj},
+        rungs.push_back({{"alpha_mm2_per_mj", std::isfinite(g.alpha) ? json(g.alpha) : json(nullptr)}, {"rms_distance_mm", g.rms_distance_mm},
+                         {"strain_energy_mj", g.strain_energy_mj},
                          {"lbfgs_iterations", g.lbfgs_iterations}, {"pairs", g.pairs}});
     if (!r.discrepancy_reached)
         logger()->warn("register-surface: the adjoint method never brought the cloud within {:.2f} mm (RMS); the smallest alpha is kept", a.discrepancy_factor * a.noise_mm);
@@ -135,7 +136,8 @@ PartialSurfaceMethod run_adjoint(const PartialSurfaceCase& c, const SurfaceMatch
             {{"model", "static co-rotational linear tetrahedra, re-linearised (R K0 R^T, CHOLMOD) at every re-pairing; unknown surface forces"},
              {"regularisation", "alpha x strain energy"},
              {"alpha_rule", fmt::format("discrepancy principle: the largest alpha whose RMS point-to-plane distance is <= {} x the noise {} mm", a.discrepancy_factor, a.noise_mm)},
-             {"chosen_alpha_mm2_per_mj", r.rungs[r.chosen].alpha}, {"discrepancy_reached", r.discrepancy_reached},
+             {"chosen_alpha_mm2_per_mj", r.at_rest_meets_noise ? json(nullptr) : json(r.rungs[r.chosen].alpha)},
+             {"discrepancy_reached", r.discrepancy_reached}, {"at_rest_meets_noise", r.at_rest_meets_noise},
              {"rungs", rungs}, {"solves", r.solves}, {"warnings", r.warnings},
              {"supports", a.fixed_nodes.empty() ? r.spring_grading > 0 ? fmt::format("none: springs to rest at every node (mean {} N/mm), graded by the distance to the cloud (exponent {})", r.spring_stiffness_n_per_mm, r.spring_grading) : fmt::format("none: springs to rest at every node ({} N/mm)", r.spring_stiffness_n_per_mm) : std::string("held")}}};
 }

@@ -414,6 +414,32 @@ TEST(SurfaceRegistration, AdjointMethodFollowsAStretchAndStopsAtTheNoiseLevel)
     EXPECT_NE(test::error_message([&] { register_surface_adjoint(model.mesh, matcher, cloud, bad); }).find("--noise"), std::string::npos);
 }
 
+TEST(SurfaceRegistration, AdjointLeavesTheModelAtRestWhereItMeetsTheCloudToTheNoise)
+{
+    // The anterior side moved 0.3 mm towards anterior: told σ 0.5 mm (τσ = 0.75 mm RMS), the model
+    // at rest already explains the cloud, so the discrepancy principle's α is infinite and not a
+    // hundredth of a millimetre may move; told σ 0.1 mm, the same cloud is followed.
+    const SurfaceModel& model = ellipsoid_model();
+    HeldAtTheBack c(model, [](const Vec3& p) { return Vec3(p + Vec3(0, -0.3, 0)); });
+    c.options.noise_mm = 0.5;
+    const AdjointSurfaceResult still = register_surface_adjoint(model.mesh, c.matcher, c.cloud, c.options);
+    EXPECT_TRUE(still.at_rest_meets_noise);
+    EXPECT_TRUE(still.discrepancy_reached);
+    ASSERT_EQ(still.rungs.size(), 1u);
+    EXPECT_TRUE(std::isinf(still.rungs[0].alpha));
+    EXPECT_GT(still.rungs[0].rms_distance_mm, 0.2); // the 0.3 mm shift is seen (facets add their own)…
+    EXPECT_LE(still.rungs[0].rms_distance_mm, 0.75); // …and lies within τσ
+    ASSERT_EQ(still.displacement_mm.size(), 3 * model.mesh.node_count());
+    for (const double u : still.displacement_mm) ASSERT_EQ(u, 0.0);
+    c.options.noise_mm = 0.1;
+    const AdjointSurfaceResult moved = register_surface_adjoint(model.mesh, c.matcher, c.cloud, c.options);
+    EXPECT_FALSE(moved.at_rest_meets_noise);
+    double largest = 0.0;
+    for (std::size_t i = 0; i < model.mesh.node_count(); ++i)
+        largest = std::max(largest, Vec3(moved.displacement_mm[3 * i], moved.displacement_mm[3 * i + 1], moved.displacement_mm[3 * i + 2]).norm());
+    EXPECT_GT(largest, 0.1);
+}
+
 TEST(SurfaceRegistration, AdjointForcesActOnlyWhereTheToolMayPressAndElasticSupportsYield)
 {
     // Issue 56 item 2: given the region where the tool pressed, the adjoint method's controls live

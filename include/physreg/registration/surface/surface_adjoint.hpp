@@ -66,6 +66,9 @@ struct AdjointSurfaceResult {
     std::vector<AdjointRung> rungs;        ///< in the order tried
     std::size_t chosen = 0;                ///< index into rungs
     bool discrepancy_reached = false;      ///< false: the smallest α was kept (noise level never reached)
+    /// The model at rest already lies within τ σ of the cloud (RMS): the discrepancy principle's α
+    /// is infinite, no force is applied and the displacement is zero; rungs holds that one state.
+    bool at_rest_meets_noise = false;
     std::vector<std::string> warnings;     ///< L-BFGS stops other than convergence, with their history
     int solves = 0;
     double spring_stiffness_n_per_mm = 0.0; ///< the springs to rest at every node (no support), N/mm: their mean
