@@ -48,8 +48,8 @@ def test_the_trap_a_turned_rest_shape_is_never_the_answer(frame):
     """With the mesh and the cloud alone (the defaults): the rigid fit turns the liver far (22°) and
     fits the 500 points better than the deformed model does, yet it is 5x farther from the truth than
     leaving the liver at rest. It must neither replace nor flag the answer, which must beat rest
-    (measured 2026-12-05: 1.15 mm against 2.95 at rest; 1.24 mm since the springs are graded by the
-    distance to the cloud, 2026-12-06 (1.25 mm with the committed binary); rigid 16.2 mm; the peer, told the supports and the force
+    (measured 2026-12-05: 1.15 mm against 2.95 at rest; 1.25 mm since the springs are graded by the
+    distance to the cloud, 2026-12-06; rigid 16.2 mm; the peer, told the supports and the force
     patch, 0.55 mm)."""
     case = physreg.PartialSurfaceCase(frame["model"], frame["cloud"], landmarks=frame["landmarks"], truth=frame["truth"])
     r = physreg.register_surface(case, uncertainty="none")  # the mode's one name: in memory, given a case
