@@ -11,6 +11,7 @@
 // node, loaded as contiguous vectors, and its scatter adds W consecutive nodes, local node after
 // local node (lanes share nodes across local nodes, never within one). On meshes from label
 // volumes most batches are runs; this removes the scalar gather and scatter that dominated.
+#include "mechanics/detail/hexahedron_stress.hpp"
 #include "physreg/mechanics/materials/material.hpp"
 
 #include <cmath>
@@ -236,44 +237,24 @@ template <typename Real, int W, bool S, bool Run, bool Box>
         }
         return;
     }
+    // The remaining laws' stress is hexahedron_stress.hpp's, shared with the GPU step; one lane
+    // loop per law, so that each vectorises without a branch.
+    if (law == MaterialLaw::st_venant_kirchhoff) {
+#pragma omp simd
+        for (int w = 0; w < W; ++w) {
+            const auto f = [&](int k) { return F[k][w]; };
+            const Sym3<Real> s = st_venant_kirchhoff_stress(right_cauchy_green<Real>(f), l.mu[w], l.lambda[w]);
+            volume_first_piola(f, s, l.vol[w], [&](int k, Real value) { P[k][w] = value; });
+        }
+        return;
+    }
     alignas(64) Real r[W];
-    if (law == MaterialLaw::neo_hookean) inverse_cube_root<Real, W>(J, r);
+    inverse_cube_root<Real, W>(J, r);
 #pragma omp simd
     for (int w = 0; w < W; ++w) {
-        const Real c0 = F[0][w] * F[0][w] + F[3][w] * F[3][w] + F[6][w] * F[6][w];
-        const Real c1 = F[1][w] * F[1][w] + F[4][w] * F[4][w] + F[7][w] * F[7][w];
-        const Real c2 = F[2][w] * F[2][w] + F[5][w] * F[5][w] + F[8][w] * F[8][w];
-        const Real c3 = F[0][w] * F[1][w] + F[3][w] * F[4][w] + F[6][w] * F[7][w];
-        const Real c4 = F[1][w] * F[2][w] + F[4][w] * F[5][w] + F[7][w] * F[8][w];
-        const Real c5 = F[0][w] * F[2][w] + F[3][w] * F[5][w] + F[6][w] * F[8][w];
-        Real s0, s1, s2, s3, s4, s5;
-        if (law == MaterialLaw::st_venant_kirchhoff) {
-            const Real tr_e = Real(0.5) * (c0 + c1 + c2 - Real(3));
-            s0 = l.lambda[w] * tr_e + l.mu[w] * (c0 - Real(1));
-            s1 = l.lambda[w] * tr_e + l.mu[w] * (c1 - Real(1));
-            s2 = l.lambda[w] * tr_e + l.mu[w] * (c2 - Real(1));
-            s3 = l.mu[w] * c3;
-            s4 = l.mu[w] * c4;
-            s5 = l.mu[w] * c5;
-        } else {
-            const Real inv_j2 = Real(1) / (J[w] * J[w]);
-            const Real mu_j = l.mu[w] * r[w] * r[w]; // μ J^(-2/3)
-            const Real a = l.kappa[w] * J[w] * (J[w] - Real(1)) - mu_j * (c0 + c1 + c2) * Real(1.0 / 3.0);
-            const Real ai = a * inv_j2; // C⁻¹ = adj(C) / J²
-            s0 = mu_j + ai * (c1 * c2 - c4 * c4);
-            s1 = mu_j + ai * (c0 * c2 - c5 * c5);
-            s2 = mu_j + ai * (c0 * c1 - c3 * c3);
-            s3 = ai * (c5 * c4 - c3 * c2);
-            s4 = ai * (c3 * c5 - c0 * c4);
-            s5 = ai * (c3 * c4 - c1 * c5);
-        }
-        const Real v = l.vol[w];
-        for (int row = 0; row < 3; ++row) {
-            const Real g0 = F[3 * row][w], g1 = F[3 * row + 1][w], g2 = F[3 * row + 2][w];
-            P[3 * row][w] = v * (g0 * s0 + g1 * s3 + g2 * s5);
-            P[3 * row + 1][w] = v * (g0 * s3 + g1 * s1 + g2 * s4);
-            P[3 * row + 2][w] = v * (g0 * s5 + g1 * s4 + g2 * s2);
-        }
+        const auto f = [&](int k) { return F[k][w]; };
+        const Sym3<Real> s = neo_hookean_stress(right_cauchy_green<Real>(f), l.mu[w], l.kappa[w], J[w], r[w]);
+        volume_first_piola(f, s, l.vol[w], [&](int k, Real value) { P[k][w] = value; });
     }
 }
 

@@ -8,6 +8,9 @@
 //  2. per node: the sum of its elements' stored forces in a fixed order (deterministic), then the
 //     update u⁺ = A (s R − F) + B u − C u⁻ and the prescribed degrees of freedom.
 // Plain C++ with PHYSREG_HD on every function: nvcc compiles it for the device, g++ for the host.
+// The stress is hexahedron_stress.hpp's, the very formulas the CPU kernel runs.
+#include "mechanics/detail/hexahedron_stress.hpp"
+
 #include <cmath>
 #include <cstdint>
 
@@ -48,6 +51,12 @@ struct StepModel {
     const double* external = nullptr;          ///< 3 per node at load factor 1, N; null: none
 };
 
+/// Writes P(k, value) into a row-major array (volume_first_piola's output).
+struct StoreRowMajor {
+    double* a;
+    PHYSREG_HD void operator()(int k, double value) const { a[k] = value; }
+};
+
 /// Kernel 1 for element e. Returns false when det F ≤ 0 (inverted element).
 PHYSREG_HD inline bool element_forces(const StepModel& m, std::int64_t e, const double* u, double* element_force)
 {
@@ -65,44 +74,14 @@ PHYSREG_HD inline bool element_forces(const StepModel& m, std::int64_t e, const 
             for (int k = 0; k < 3; ++k) F[3 * r + k] += ua[a][r] * b[3 * a + k];
     const double J = F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) + F[2] * (F[3] * F[7] - F[4] * F[6]);
     const bool sound = J > 0.0;
-    const double c0 = F[0] * F[0] + F[3] * F[3] + F[6] * F[6];
-    const double c1 = F[1] * F[1] + F[4] * F[4] + F[7] * F[7];
-    const double c2 = F[2] * F[2] + F[5] * F[5] + F[8] * F[8];
-    const double c3 = F[0] * F[1] + F[3] * F[4] + F[6] * F[7];
-    const double c4 = F[1] * F[2] + F[4] * F[5] + F[7] * F[8];
-    const double c5 = F[0] * F[2] + F[3] * F[5] + F[6] * F[8];
-    const double mu = m.mu[mat], lambda = m.lambda[mat], kappa = m.kappa[mat];
-    double s0, s1, s2, s3, s4, s5; // second Piola–Kirchhoff stress S (symmetric)
-    if (m.law == step_st_venant_kirchhoff) {
-        const double tr_e = 0.5 * (c0 + c1 + c2 - 3.0);
-        s0 = lambda * tr_e + mu * (c0 - 1.0);
-        s1 = lambda * tr_e + mu * (c1 - 1.0);
-        s2 = lambda * tr_e + mu * (c2 - 1.0);
-        s3 = mu * c3;
-        s4 = mu * c4;
-        s5 = mu * c5;
-    } else {
-        const double jj = sound ? J : 1.0; // an inverted element is reported; keep the arithmetic finite
-        const double r = 1.0 / cbrt(jj);
-        const double inv_j2 = 1.0 / (jj * jj);
-        const double mu_j = mu * r * r; // μ J^(-2/3)
-        const double a = kappa * jj * (jj - 1.0) - mu_j * (c0 + c1 + c2) * (1.0 / 3.0);
-        const double ai = a * inv_j2; // C⁻¹ = adj(C) / J²
-        s0 = mu_j + ai * (c1 * c2 - c4 * c4);
-        s1 = mu_j + ai * (c0 * c2 - c5 * c5);
-        s2 = mu_j + ai * (c0 * c1 - c3 * c3);
-        s3 = ai * (c5 * c4 - c3 * c2);
-        s4 = ai * (c3 * c5 - c0 * c4);
-        s5 = ai * (c3 * c4 - c1 * c5);
-    }
-    const double v = m.volume[g];
-    double P[9]; // V F S
-    for (int row = 0; row < 3; ++row) {
-        const double g0 = F[3 * row], g1 = F[3 * row + 1], g2 = F[3 * row + 2];
-        P[3 * row] = v * (g0 * s0 + g1 * s3 + g2 * s5);
-        P[3 * row + 1] = v * (g0 * s3 + g1 * s1 + g2 * s4);
-        P[3 * row + 2] = v * (g0 * s5 + g1 * s4 + g2 * s2);
-    }
+    // C = Fᵀ F, the second Piola–Kirchhoff stress S and V F S: hexahedron_stress.hpp, as the CPU kernel.
+    const physreg::detail::RowMajor3<double> f{F};
+    const auto cg = physreg::detail::right_cauchy_green<double>(f);
+    const double jj = sound ? J : 1.0; // an inverted element is reported; keep the arithmetic finite
+    const auto s = m.law == step_st_venant_kirchhoff ? physreg::detail::st_venant_kirchhoff_stress(cg, m.mu[mat], m.lambda[mat])
+                                                     : physreg::detail::neo_hookean_stress(cg, m.mu[mat], m.kappa[mat], jj, 1.0 / cbrt(jj));
+    double P[9];
+    physreg::detail::volume_first_piola(f, s, m.volume[g], StoreRowMajor{P});
     const double khg = m.hourglass[mat] * m.vb2[g];
     double q[4][3];
     for (int mode = 0; mode < 4; ++mode)
