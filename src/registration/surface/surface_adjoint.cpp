@@ -342,11 +342,21 @@ AdjointSurfaceResult register_surface_adjoint(const VolumeMesh& mesh, const Surf
     // pairs, about to be recomputed, bound the accuracy anyway (issue 56's time target).
     parameters.past = 5;
     parameters.delta = 1e-5;
+    // The answer at the state in problem->u and problem->f.
+    const auto finish = [&]() {
+        result.displacement_mm.assign(problem->u.data(), problem->u.data() + problem->u.size());
+        result.force_n.assign(problem->f.data(), problem->f.data() + problem->f.size());
+        result.solves = problem->solves;
+        result.spring_stiffness_n_per_mm = problem->anchor;
+        result.spring_grading = options.fixed_nodes.empty() ? options.spring_grading : 0.0;
+        result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        return result;
+    };
     // α → ∞ first: where the model at rest already meets the cloud to the noise, no force is
     // warranted (the discrepancy principle's largest α is infinite). Without this the first rung's
     // stiff but finite α moved the organ by hundredths of a millimetre the data do not resolve.
-    problem->alpha = alpha0;
-    problem->evaluate(v.data(), nullptr);
+    problem->u = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(3 * mesh.node_count()));
+    problem->f = problem->u;
     if (const double rest_rms = problem->rms_distance(); rest_rms <= target) {
         AdjointRung rung;
         rung.alpha = std::numeric_limits<double>::infinity();
@@ -354,15 +364,9 @@ AdjointSurfaceResult register_surface_adjoint(const VolumeMesh& mesh, const Surf
         rung.pairs = static_cast<int>(problem->pairs.size());
         result.rungs.push_back(rung);
         result.discrepancy_reached = result.at_rest_meets_noise = true;
-        result.displacement_mm.assign(3 * mesh.node_count(), 0.0);
-        result.force_n.assign(3 * mesh.node_count(), 0.0);
-        result.solves = problem->solves;
-        result.spring_stiffness_n_per_mm = problem->anchor;
-        result.spring_grading = options.fixed_nodes.empty() ? options.spring_grading : 0.0;
-        result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         logger()->debug("adjoint registration: the model at rest meets the cloud to the noise (RMS {:.3f} ≤ {:.3f} mm): no force", rest_rms, target);
         if (progress) progress(1.0, fmt::format("at rest: RMS distance {:.2f} mm, within the noise", rest_rms));
-        return result;
+        return finish();
     }
     for (int step = 0; step < options.alpha_steps; ++step) {
         problem->alpha = alpha0 * std::pow(10.0, -0.5 * step);
@@ -408,13 +412,7 @@ AdjointSurfaceResult register_surface_adjoint(const VolumeMesh& mesh, const Surf
     problem->evaluate(best_v.data(), nullptr);
     for (std::size_t i = 0; i < problem->fixed.size(); ++i)
         if (problem->fixed[i]) problem->u[static_cast<Eigen::Index>(i)] = 0.0;
-    result.displacement_mm.assign(problem->u.data(), problem->u.data() + problem->u.size());
-    result.force_n.assign(problem->f.data(), problem->f.data() + problem->f.size());
-    result.solves = problem->solves;
-    result.spring_stiffness_n_per_mm = problem->anchor;
-    result.spring_grading = options.fixed_nodes.empty() ? options.spring_grading : 0.0;
-    result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return result;
+    return finish();
 }
 
 } // namespace physreg
