@@ -96,8 +96,9 @@ struct SupportDecision {
     std::vector<std::string> notes;              ///< supports the data contradict, looser ones that fit alike elsewhere
 };
 
-/// The hypotheses registered in order until one explains the data to the noise; the most
-/// constrained one the data do not tell apart from the best wins.
+/// The hypotheses registered in order (named supports that explain the data to the noise end the
+/// search); of those the data do not tell apart from the best fit, the named supports win, else the
+/// most constrained unless a looser one needs clearly less strain energy (≤ 0.9×).
 SupportDecision choose_support(const PartialSurfaceCase& c, const PartialSurfaceSettings& s, const std::vector<SupportHypothesis>& hypotheses,
                                const TledModel& model, const SurfaceMatcher& matcher, SurfaceRegistrationOptions options, Judges& judges,
                                const std::function<void(double, const std::string&)>& report);
