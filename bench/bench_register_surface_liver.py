@@ -6,7 +6,9 @@
 # safeguard — against ≤ 10 s. Runs the default and `--method biomechanical` interleaved, REPEAT
 # times each in one session; writes where the time went (the summary's per-method seconds).
 # Usage: /usr/bin/python3 bench/bench_register_surface_liver.py [--physreg build/bin/physreg]
-#            [--out bench/results/bench_register_surface_liver.json] [--repeat 3]
+#            [--out bench/results/bench_register_surface_liver.json] [--repeat 3] [--compare OTHER_PHYSREG]
+# --compare adds a third variant, the defaults with another build (its lib/ found from its bin/ by
+# RUNPATH or LD_LIBRARY_PATH as given), interleaved with the others: the ratio comes from one run.
 # Needs ../shared/data/adjoint-liver and numpy.
 import argparse
 import datetime
@@ -27,6 +29,7 @@ ap = argparse.ArgumentParser()
 ap.add_argument("--physreg", default=os.path.join(ROOT, "build", "bin", "physreg"))
 ap.add_argument("--out", default=os.path.join(ROOT, "bench", "results", "bench_register_surface_liver.json"))
 ap.add_argument("--repeat", type=int, default=3)
+ap.add_argument("--compare", help="another physreg binary whose defaults run interleaved with this one's")
 a = ap.parse_args()
 if not os.path.isdir(study.DATA):
     sys.exit(f"{study.DATA} is missing")
@@ -39,10 +42,12 @@ with open(os.path.join(work, "cloud.csv"), "w") as f:
 truth = 1000.0 * np.load(os.path.join(seq, "positions-default.npy"))[0]
 study.write_points(os.path.join(work, "true.csv"), names, truth[interior])
 runs = {"default": [], "biomechanical": []}
+if a.compare:
+    runs["default_compared"] = []
 for r in range(a.repeat):
     for variant in runs:
         out = os.path.join(work, f"{variant}_{r}")
-        cmd = [a.physreg, "-q", "--no-report", "register-surface", "--model", os.path.join(common, "liver_mm.msh"), "--cloud",
+        cmd = [a.compare if variant == "default_compared" else a.physreg, "-q", "--no-report", "register-surface", "--model", os.path.join(common, "liver_mm.msh"), "--cloud",
                os.path.join(work, "cloud.csv"), "--landmarks", os.path.join(common, "targets_rest.csv"), "--landmarks-truth",
                os.path.join(work, "true.csv"), "-o", out]
         if variant == "biomechanical":
@@ -59,8 +64,13 @@ result = {"benchmark": "register-surface defaults on the adjoint-liver (3 046 no
           "date": datetime.datetime.now().isoformat(timespec="seconds"), "host": platform.node(), "cpus": os.cpu_count(),
           "target_s": 10.0, "runs": runs,
           "median_s": {v: statistics.median(r["seconds"] for r in runs[v]) for v in runs}}
+if a.compare:
+    result["compared_binary"] = a.compare
+    result["ratio_default_to_compared"] = result["median_s"]["default"] / result["median_s"]["default_compared"]
 os.makedirs(os.path.dirname(a.out), exist_ok=True)
 json.dump(result, open(a.out, "w"), indent=1)
 for v, rs in runs.items():
     print(f"{v}: median {result['median_s'][v]:.1f} s over {len(rs)} runs (answer {rs[0]['answer']}, TRE {rs[0]['tre_mm']:.2f} mm); "
           f"split of the first: " + ", ".join(f"{k} {t:.1f}" for k, t in rs[0]["split_s"].items()))
+if a.compare:
+    print(f"default against {a.compare}: {result['ratio_default_to_compared']:.2f}× its median time")
