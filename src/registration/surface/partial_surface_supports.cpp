@@ -19,6 +19,7 @@
 #include "physreg/mechanics/implicit/stiffness_assembly.hpp"
 #include "physreg/mesh/label_grid.hpp"
 #include "physreg/mesh/point_location.hpp"
+#include "physreg/mesh/triangle_search.hpp"
 #include "physreg/registration/surface/surface_adjoint.hpp"
 #include "physreg/registration/surface/surface_model.hpp"
 #include "physreg/registration/surface/surface_registration.hpp"
@@ -121,6 +122,41 @@ Supports named_supports(const PartialSurfaceCase& c, const PartialSurfaceSetting
     return out;
 }
 
+/// Issue 56 item 3, "the parts of the surface that did not move are observed": a cloud point within
+/// 1.5 σ of the model at rest shows the surface unmoved there (still); any other shows motion. The
+/// surface nodes within 1.25 × the cloud's point spacing of a still point and farther than twice
+/// that from every moved one are held. Offered only where they are at least a tenth of the surface
+/// nodes: a few held nodes pin the organ at points (in the 60-case study, patches that left 4-6 such
+/// nodes were placed 0.4-0.7 mm worse than at rest), and on the public liver's pushed surface almost
+/// every point moved (0-2 nodes). Empty when not offered; `report` says why either way.
+Supports still_supports(const PartialSurfaceCase& c, const PartialSurfaceSettings& s, json& report)
+{
+    Supports out;
+    const double threshold = 1.5 * s.noise;
+    const double radius = 1.25 * mean_point_spacing_mm(c.cloud.points);
+    const TriangleSearch rest_surface(c.mesh.nodes, c.surface.triangles);
+    std::vector<Vec3> still, moved;
+    for (const auto& p : c.cloud.points) (rest_surface.closest(p).distance_mm <= threshold ? still : moved).push_back(p);
+    std::set<std::int32_t> surface_nodes;
+    for (const auto& t : c.surface.triangles) surface_nodes.insert(t.begin(), t.end());
+    const auto within = [](const Vec3& x, const std::vector<Vec3>& points, double r) {
+        return std::any_of(points.begin(), points.end(), [&](const Vec3& q) { return (x - q).squaredNorm() <= r * r; });
+    };
+    for (const auto n : surface_nodes) {
+        const Vec3& x = c.mesh.nodes[static_cast<std::size_t>(n)];
+        if (within(x, still, radius) && !within(x, moved, 2.0 * radius)) out.nodes.push_back(n);
+    }
+    const bool offered = out.nodes.size() * 10 >= surface_nodes.size() && out.nodes.size() < surface_nodes.size();
+    report = {{"still_points", still.size()}, {"moved_points", moved.size()}, {"still_within_mm", threshold}, {"radius_mm", radius},
+              {"nodes", out.nodes.size()}, {"surface_nodes", surface_nodes.size()}, {"offered", offered},
+              {"rule", "cloud points within 1.5 σ of the model at rest are still; surface nodes within 1.25 × the point spacing of a still point and "
+                       "farther than twice that from every moved point are held; offered when they are at least a tenth of the surface nodes"}};
+    if (!offered) return {};
+    out.sources.push_back({{"source", "still"}, {"rule", "surface nodes where the cloud shows no motion"}, {"still_points", still.size()},
+                           {"moved_points", moved.size()}, {"nodes", out.nodes.size()}});
+    return out;
+}
+
 bool has_named_supports(const PartialSurfaceCase& c, const PartialSurfaceSettings& s)
 {
     return !c.support_points.empty() || !c.support_nodes.empty() || !s.support_region.empty();
@@ -188,6 +224,11 @@ std::vector<SupportHypothesis> support_hypotheses(const PartialSurfaceCase& c, c
         if (named)
             out.push_back({"named", finish_supports(named_supports(c, s), c, "--support-points/--support-nodes/--support-region"), s.support_stiffness,
                            "the supports the user named"});
+        json still_report;
+        if (Supports still = still_supports(c, s, still_report); !still.nodes.empty())
+            out.push_back({"still", std::move(still), s.support_stiffness,
+                           fmt::format("the cloud shows the surface unmoved there: {} of {} points lie within {:.2f} mm of the model at rest",
+                                       still_report["still_points"].get<std::size_t>(), c.cloud.points.size(), still_report["still_within_mm"].get<double>())});
         if (c.patient_frame) {
             Supports posterior;
             posterior.nodes = surface_nodes_facing(c.mesh, c.surface, Vec3::UnitY(), 0.5);
@@ -263,17 +304,21 @@ LoadRegion load_region(const PartialSurfaceCase& c, const PartialSurfaceSettings
     return out;
 }
 
+/// Supports the user named or the cloud shows unmoved ('still') are evidence, not guesses: once they
+/// fit the cloud to the noise the search ends, and among the candidates they win outright.
+static bool stated_by_data_or_user(const SupportHypothesis& h) { return h.name == "named" || h.name == "still"; }
+
 /// A looser hypothesis must need at most this share of the more constrained one's strain energy to
 /// win: energies within 10 % are a tie (the small phantom's patches at rest differ by 3-9 %).
 constexpr double looser_energy_ratio = 0.9;
 
 /// Issue 46 item 3: the hypotheses are registered in order, the most constrained first. Named
-/// supports are the user's word: once they explain the data to the noise (the discrepancy
+/// supports are the user's word and still ones the cloud's: once they explain the data to the noise (the discrepancy
 /// principle: mean cloud-to-model distance ≤ 1.2 σ, i.e. 1.5 σ for an RMS, a normal error's mean
 /// being 0.8 of its RMS), looser ones are not run. The guessed ones (posterior, springs) are all run.
 /// Those whose fit lies within what the data resolve of the best one (0.1 mm or 10 %) are the
 /// candidates: a hard threshold alone would let 0.03 mm decide between holding the organ and letting
-/// it float. Of the candidates, the named supports win outright; otherwise a looser one wins only
+/// it float. Of the candidates, the named or still supports win outright; otherwise a looser one wins only
 /// where the organ needs clearly less strain energy under it (≤ 0.9×) to explain the same cloud
 /// (issue 56 item 3: forces to fit a patch are not equally plausible under every support). In the
 /// 60-case study the posterior guess fitted every patch to the noise while the truth was held
@@ -286,9 +331,9 @@ SupportDecision choose_support(const PartialSurfaceCase& c, const PartialSurface
     const double level = discrepancy_level_mm(s);
     std::vector<double> fit, energy;
     d.report = {{"setting", s.support}, {"discrepancy_level_mm", level},
-                {"rule", fmt::format("the hypotheses are tried from the most constrained (named supports, once their mean cloud-to-model "
+                {"rule", fmt::format("the hypotheses are tried from the most constrained (named or still supports, once their mean cloud-to-model "
                                      "distance is ≤ {:.2f} mm = 1.2 × the noise σ {} mm, end the search); of those within 0.1 mm or 10 % of the best "
-                                     "fit, the named supports win, else the most constrained unless a looser one needs ≤ {} × its strain energy",
+                                     "fit, the named or still supports win, else the most constrained unless a looser one needs ≤ {} × its strain energy",
                                      level, s.noise, looser_energy_ratio)},
                 {"hypotheses", json::array()}};
     for (std::size_t k = 0; k < hypotheses.size(); ++k) {
@@ -313,7 +358,8 @@ SupportDecision choose_support(const PartialSurfaceCase& c, const PartialSurface
         d.report["hypotheses"].push_back(entry);
         logger()->info("register-surface: supports '{}': cloud to model {:.3f} mm mean, strain energy {:.4f} mJ{}", h.name, fit.back(),
                        e["strain_energy_mj"].get<double>(), r.stopped.empty() ? "" : " (" + r.stopped + ")");
-        if (h.name == "named" && fit.back() <= level) break; // the user's supports explain the data to the noise: looser ones are not needed
+        // Supports the user named or the cloud shows explain the data to the noise: looser ones are not needed.
+        if (stated_by_data_or_user(h) && fit.back() <= level) break;
     }
     // The candidates: the hypotheses whose fit the data do not tell apart from the best one tried.
     const double best = *std::min_element(fit.begin(), fit.end());
@@ -321,7 +367,7 @@ SupportDecision choose_support(const PartialSurfaceCase& c, const PartialSurface
     std::size_t chosen = 0;
     while (fit[chosen] > best + margin) ++chosen;
     const std::size_t most_constrained = chosen;
-    if (hypotheses[chosen].name != "named")
+    if (!stated_by_data_or_user(hypotheses[chosen]))
         for (std::size_t k = chosen + 1; k < fit.size(); ++k)
             if (fit[k] <= best + margin && energy[k] < looser_energy_ratio * energy[chosen]) chosen = k;
     std::string reason;
@@ -335,8 +381,8 @@ SupportDecision choose_support(const PartialSurfaceCase& c, const PartialSurface
     else
         reason = fmt::format("the most constrained hypothesis whose fit ({:.3f} mm) lies within {:.2f} mm of the best tried ({:.3f} mm){}", fit[chosen],
                              margin, best,
-                             hypotheses[chosen].name == "named" && fit[chosen] <= level
-                                 ? fmt::format("; the named supports reached the noise level ({:.2f} mm), so the looser ones were not tried", level)
+                             stated_by_data_or_user(hypotheses[chosen]) && fit[chosen] <= level
+                                 ? fmt::format("; the {} supports reached the noise level ({:.2f} mm), so the looser ones were not tried", hypotheses[chosen].name, level)
                              : fit.size() < hypotheses.size() ? std::string()
                                                              : fmt::format("; no looser candidate needs ≤ {} × its strain energy", looser_energy_ratio));
     d.chosen = chosen;
@@ -344,12 +390,13 @@ SupportDecision choose_support(const PartialSurfaceCase& c, const PartialSurface
     for (std::size_t k = 0; k < fit.size(); ++k) {
         d.report["hypotheses"][k]["chosen"] = k == d.chosen;
         if (k == d.chosen) continue;
-        if (k < d.chosen && (hypotheses[k].name == "named" || hypotheses[k].name == "posterior") && fit[k] <= best + margin)
+        const bool held_guess = hypotheses[k].name == "named" || hypotheses[k].name == "still" || hypotheses[k].name == "posterior";
+        if (k < d.chosen && held_guess && fit[k] <= best + margin)
             d.notes.push_back(fmt::format("the {} supports fit the cloud as well ({:.2f} against {:.2f} mm) but need {:.1f}× the organ's strain energy of "
                                           "supports '{}' ({:.4f} against {:.4f} mJ): the forces they need are the less plausible, so they were left out",
                                           hypotheses[k].name, fit[k], fit[d.chosen], energy[k] / std::max(energy[d.chosen], 1e-300), winner.name,
                                           energy[k], energy[d.chosen]));
-        else if (k < d.chosen && (hypotheses[k].name == "named" || hypotheses[k].name == "posterior"))
+        else if (k < d.chosen && held_guess)
             d.notes.push_back(fmt::format("the data contradict the {} supports ({}): held there, the model fits the cloud at {:.2f} mm mean against "
                                           "{:.2f} mm with supports '{}', so they were left out", hypotheses[k].name,
                                           hypotheses[k].supports.sources.dump(), fit[k], fit[d.chosen], winner.name));
