@@ -232,6 +232,27 @@ def test_paper001_safeguard_keeps_an_answer_that_fits_by_stretching(surface_thro
     assert guard["flags"] == [] and guard["answer"] == "biomechanical" and r.method == "biomechanical", guard
 
 
+def test_paper001_the_cloud_shows_where_the_organ_did_not_move(surface_in_memory):
+    """Issue 56 item 3: on a sparse cloud over most of the surface, the parts that did not move are
+    observed. The push (a 15 mm sphere 30 mm into the right lobe, the truth the phantom's own
+    Mooney-Rivlin tetrahedra held at the back): most cloud points lie on the model at rest; the
+    surface nodes near them and away from every moved point are the 'still' hypothesis, tried first
+    and kept once it fits to the noise. Measured 2026-12-06: 229 of 1 005 nodes held, internal TRE
+    1.18 mm against 2.21 at rest."""
+    _, r = surface_in_memory
+    decision = r.summary["support_hypotheses"]
+    first = decision["hypotheses"][0]
+    assert first["name"] == "still" and decision["chosen"] == "still", decision
+    source = first["sources"][0]
+    assert source["still_points"] > source["moved_points"] > 0, source
+    surface_nodes = r.summary["model"]["surface_triangles"] // 2 + 2  # a closed surface of genus 0: V = F/2 + 2
+    assert surface_nodes > first["nodes"] >= 0.1 * surface_nodes, (first["nodes"], surface_nodes)
+    assert "unmoved" in first["why"] and "still supports reached the noise level" in decision["reason"], decision
+    assert r.summary["supports"]["kind"] == "held" and len(r.summary["supports"]["nodes"]) == first["nodes"]
+    tre = {k: m["tre"]["internal"]["mean_mm"] for k, m in r.summary["methods"].items()}
+    assert tre[r.method] < 0.6 * tre["at_rest"], tre
+
+
 def test_paper001_a_support_that_needs_more_strain_energy_to_fit_a_patch_gives_way(surface_through_the_command):
     """Issue 56 item 3: the forces that fit a patch are not equally plausible under every support. The
     cloud is the model's front moved 6 mm to the patient's left, the whole organ with it (the truth is
