@@ -202,9 +202,10 @@ const SettingsSpec<PartialSurfaceSettings>& partial_surface_spec()
                   "pairs longer than this are dropped (a cloud that does not belong to the model), mm", 0.0, unbounded, true)
             .real("normal_agreement", "--normal-agreement", &S::normal_agreement, "", "pruning n_t: keep pairs whose normals agree ≥ n_t", -1.0, 1.0)
             .choice("support", "--support", &S::support, {"auto", "posterior", "springs", "none"},
-                    "auto (default: the supports are hypotheses — the named supports, the posterior surface when the model is in a patient frame, "
-                    "springs at every node — tried from the most constrained until one fits to the noise; the most constrained within 0.1 mm or "
-                    "10 % of the best fit wins), posterior "
+                    "auto (default: the supports are hypotheses — the named supports, the surface the cloud shows unmoved ('still'), the "
+                    "posterior surface when the model is in a patient frame, springs at every node — tried from the most constrained; named or "
+                    "still supports that fit to the noise end the search and win; of the others within 0.1 mm or 10 % of the best fit, the most "
+                    "constrained wins unless a looser one needs ≤ 0.9× its strain energy), posterior "
                     "(surface nodes facing posterior, normal · +y > 0.5, where the vena cava and ligaments hold a liver), springs (soft springs to "
                     "rest at every node, BCF-FEM) or none (paper 001's free model)")
             .real("support_radius", "--support-radius", &S::support_radius, "mm", "--support-points: radius, mm", 0.0, unbounded, true)
@@ -479,7 +480,7 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, c
 
     // 3. The supports are hypotheses (issue 46 item 3): each is registered, the most constrained one
     //    the data accept wins.
-    const auto hypotheses = support_hypotheses(c, s);
+    const auto hypotheses = support_hypotheses(c, s, load);
     require_a_free_load_node(load, hypotheses);
     const SupportDecision decision = choose_support(c, s, hypotheses, model, matcher, options, judges, report);
     const SupportHypothesis& held = hypotheses[decision.chosen];

@@ -128,8 +128,9 @@ Supports named_supports(const PartialSurfaceCase& c, const PartialSurfaceSetting
 /// that from every moved one are held. Offered only where they are at least a tenth of the surface
 /// nodes: a few held nodes pin the organ at points (in the 60-case study, patches that left 4-6 such
 /// nodes were placed 0.4-0.7 mm worse than at rest), and on the public liver's pushed surface almost
-/// every point moved (0-2 nodes). Empty when not offered; `report` says why either way.
-Supports still_supports(const PartialSurfaceCase& c, const PartialSurfaceSettings& s, json& report)
+/// every point moved (0-2 nodes). The load region (where the tool pressed) is left out. Empty when
+/// not offered; `report` says why either way.
+Supports still_supports(const PartialSurfaceCase& c, const PartialSurfaceSettings& s, const LoadRegion& load, json& report)
 {
     Supports out;
     const double threshold = 1.5 * s.noise;
@@ -144,6 +145,8 @@ Supports still_supports(const PartialSurfaceCase& c, const PartialSurfaceSetting
     };
     for (const auto n : surface_nodes) {
         const Vec3& x = c.mesh.nodes[static_cast<std::size_t>(n)];
+        // Where the tool is said to press is never a support, whatever the cloud shows there.
+        if (std::binary_search(load.nodes.begin(), load.nodes.end(), n)) continue;
         if (within(x, still, radius) && !within(x, moved, 2.0 * radius)) out.nodes.push_back(n);
     }
     const bool offered = out.nodes.size() * 10 >= surface_nodes.size() && out.nodes.size() < surface_nodes.size();
@@ -151,7 +154,11 @@ Supports still_supports(const PartialSurfaceCase& c, const PartialSurfaceSetting
               {"nodes", out.nodes.size()}, {"surface_nodes", surface_nodes.size()}, {"offered", offered},
               {"rule", "cloud points within 1.5 σ of the model at rest are still; surface nodes within 1.25 × the point spacing of a still point and "
                        "farther than twice that from every moved point are held; offered when they are at least a tenth of the surface nodes"}};
-    if (!offered) return {};
+    if (!offered) {
+        logger()->info("register-surface: {} of {} cloud points lie within {:.2f} mm of the model at rest, leaving {} of {} surface nodes (less than a "
+                       "tenth, or all): no 'still' supports", still.size(), c.cloud.points.size(), threshold, out.nodes.size(), surface_nodes.size());
+        return {};
+    }
     out.sources.push_back({{"source", "still"}, {"rule", "surface nodes where the cloud shows no motion"}, {"still_points", still.size()},
                            {"moved_points", moved.size()}, {"nodes", out.nodes.size()}});
     return out;
@@ -196,7 +203,7 @@ double spring_stiffness_n_per_mm(const PartialSurfaceCase& c, const PartialSurfa
 /// named supports added, as before); auto offers the named supports, the posterior surface only in a
 /// patient frame (a label volume's LPS space: elsewhere nothing says which side is posterior) and
 /// springs at every node (BCF-FEM's way); the free model only when asked (--support none).
-std::vector<SupportHypothesis> support_hypotheses(const PartialSurfaceCase& c, const PartialSurfaceSettings& s)
+std::vector<SupportHypothesis> support_hypotheses(const PartialSurfaceCase& c, const PartialSurfaceSettings& s, const LoadRegion& load)
 {
     std::vector<SupportHypothesis> out;
     const bool named = has_named_supports(c, s);
@@ -225,7 +232,7 @@ std::vector<SupportHypothesis> support_hypotheses(const PartialSurfaceCase& c, c
             out.push_back({"named", finish_supports(named_supports(c, s), c, "--support-points/--support-nodes/--support-region"), s.support_stiffness,
                            "the supports the user named"});
         json still_report;
-        if (Supports still = still_supports(c, s, still_report); !still.nodes.empty())
+        if (Supports still = still_supports(c, s, load, still_report); !still.nodes.empty())
             out.push_back({"still", std::move(still), s.support_stiffness,
                            fmt::format("the cloud shows the surface unmoved there: {} of {} points lie within {:.2f} mm of the model at rest",
                                        still_report["still_points"].get<std::size_t>(), c.cloud.points.size(), still_report["still_within_mm"].get<double>())});

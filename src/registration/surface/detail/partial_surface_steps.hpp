@@ -54,7 +54,7 @@ std::vector<std::int32_t> read_node_ids(const std::string& path, std::size_t nod
 /// The soft springs' stiffness of the springs hypothesis, N/mm per node and direction.
 double spring_stiffness_n_per_mm(const PartialSurfaceCase& c, const PartialSurfaceSettings& s);
 /// The hypotheses to try, the most constrained first.
-std::vector<SupportHypothesis> support_hypotheses(const PartialSurfaceCase& c, const PartialSurfaceSettings& s);
+std::vector<SupportHypothesis> support_hypotheses(const PartialSurfaceCase& c, const PartialSurfaceSettings& s, const LoadRegion& load);
 /// Where forces may act; Error naming the source for nodes off the surface or far from the cloud.
 LoadRegion load_region(const PartialSurfaceCase& c, const PartialSurfaceSettings& s);
 
