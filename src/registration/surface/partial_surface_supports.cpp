@@ -379,7 +379,10 @@ SupportDecision choose_support(const PartialSurfaceCase& c, const PartialSurface
             if (fit[k] <= best + margin && energy[k] < looser_energy_ratio * energy[chosen]) chosen = k;
     std::string reason;
     if (hypotheses.size() == 1)
-        reason = "the only hypothesis: --support " + s.support + " asks for it";
+        reason = s.support == "auto" ? fmt::format("the only hypothesis offered: {}", hypotheses[0].name == "springs"
+                                                           ? "no supports named, no tenth of the surface shown unmoved, no patient frame"
+                                                           : "--support auto")
+                                     : "the only hypothesis: --support " + s.support + " asks for it";
     else if (chosen != most_constrained)
         reason = fmt::format("it fits the cloud as well ({:.3f} mm, within {:.2f} mm of the best, {:.3f} mm) as the more constrained '{}' ({:.3f} mm) "
                              "with {:.2f}× the organ's strain energy ({:.4f} against {:.4f} mJ): the forces '{}' needs are the less plausible",
@@ -388,10 +391,12 @@ SupportDecision choose_support(const PartialSurfaceCase& c, const PartialSurface
     else
         reason = fmt::format("the most constrained hypothesis whose fit ({:.3f} mm) lies within {:.2f} mm of the best tried ({:.3f} mm){}", fit[chosen],
                              margin, best,
-                             stated_by_data_or_user(hypotheses[chosen]) && fit[chosen] <= level
+                             !stated_by_data_or_user(hypotheses[chosen])
+                                 ? fmt::format("; no looser candidate needs ≤ {} × its strain energy", looser_energy_ratio)
+                             : fit[chosen] <= level
                                  ? fmt::format("; the {} supports reached the noise level ({:.2f} mm), so the looser ones were not tried", hypotheses[chosen].name, level)
-                             : fit.size() < hypotheses.size() ? std::string()
-                                                             : fmt::format("; no looser candidate needs ≤ {} × its strain energy", looser_energy_ratio));
+                                 : fmt::format("; the {} supports win among the candidates (they are {}, not a guess); none reached the noise level ({:.2f} mm)",
+                                               hypotheses[chosen].name, hypotheses[chosen].name == "named" ? "the user's word" : "what the cloud shows", level));
     d.chosen = chosen;
     const auto& winner = hypotheses[d.chosen];
     for (std::size_t k = 0; k < fit.size(); ++k) {
