@@ -428,6 +428,64 @@ void require_a_free_load_node(const LoadRegion& load, const std::vector<SupportH
          load.sources.dump());
 }
 
+struct MethodRuns {
+    json uncertainty;
+    bool rigid_pose_determined = true;
+    std::vector<std::string> rigid_notes;
+};
+
+/// 3b. How well the cloud determines the answer (issue 46 item 5): its two halves registered apart;
+/// and 4. every method, the chosen one the answer, the others the report's baselines (appended to
+/// `methods`: at rest, rigid, ICP, biomechanical, adjoint).
+MethodRuns run_methods(const PartialSurfaceCase& c, const PartialSurfaceSettings& s, const TledModel& model, const SurfaceMatcher& matcher,
+                       const SurfaceRegistrationOptions& options, const SupportHypothesis& held, const SurfaceRegistrationResult& b, double E,
+                       const Judges& judges, const std::function<void(double, const std::string&)>& report, std::vector<PartialSurfaceMethod>& methods)
+{
+    MethodRuns runs;
+    methods.push_back({"at_rest", std::vector<double>(3 * c.mesh.node_count(), 0.0), 0.0, json::object()});
+    const auto halves_and_rigid = [&] {
+        runs.uncertainty = uncertainty_of(c, s, model, matcher, options, held, b.displacement_mm, judges, report);
+        report(0.8, "rigid baselines");
+        run_rigid_methods(c, model, matcher, options, s, methods, runs.rigid_pose_determined, runs.rigid_notes);
+    };
+    std::optional<PartialSurfaceMethod> adjoint;
+    if (s.method == "adjoint") {
+        // The adjoint answer shares nothing with the halves and the rigid starts, and its solves run
+        // on one core: the two run side by side (issue 56's time: on the public liver 7.9 s of
+        // adjoint followed 2.5 s of halves and rigid starts). Nested regions inside run on their
+        // section's thread alone; only the baselines' side reports progress.
+        report(0.75, "adjoint registration, beside the cloud halves and the rigid baselines");
+        std::exception_ptr adjoint_error, baselines_error;
+#pragma omp parallel sections num_threads(2)
+        {
+#pragma omp section
+            {
+                try {
+                    adjoint = run_adjoint(c, matcher, options, E, s, held.name == "springs" ? held.stiffness : 0.0, {});
+                } catch (...) {
+                    adjoint_error = std::current_exception();
+                }
+            }
+#pragma omp section
+            {
+                try {
+                    halves_and_rigid();
+                } catch (...) {
+                    baselines_error = std::current_exception();
+                }
+            }
+        }
+        if (baselines_error) std::rethrow_exception(baselines_error);
+        if (adjoint_error) std::rethrow_exception(adjoint_error);
+    } else {
+        halves_and_rigid();
+    }
+    methods.push_back({"biomechanical", b.displacement_mm, b.seconds, biomechanical_details(b)});
+    methods.back().details["support"] = held.name;
+    if (adjoint) methods.push_back(std::move(*adjoint));
+    return runs;
+}
+
 } // namespace
 
 PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, const PartialSurfaceSettings& settings,
@@ -493,53 +551,12 @@ PartialSurfaceResult register_partial_surface(const PartialSurfaceCase& given, c
         logger()->info("register-surface: {} support nodes ({}) {}", options.fixed_nodes.size(), held.name,
                        held.stiffness > 0 ? fmt::format("on springs of {} N/mm", held.stiffness) : std::string("held at rest"));
 
-    // 3b. How well the cloud determines that answer (issue 46 item 5): its two halves registered
-    //     apart; and 4. every method, the chosen one the answer, the others the report's baselines.
+    // 3b. How well the cloud determines that answer, and 4. every method.
     auto& methods = result.methods;
-    methods.push_back({"at_rest", std::vector<double>(3 * c.mesh.node_count(), 0.0), 0.0, json::object()});
-    json uncertainty;
-    bool rigid_pose_determined = true;
-    std::vector<std::string> rigid_notes;
-    const auto halves_and_rigid = [&] {
-        uncertainty = uncertainty_of(c, s, model, matcher, options, held, b.displacement_mm, judges, report);
-        report(0.8, "rigid baselines");
-        run_rigid_methods(c, model, matcher, options, s, methods, rigid_pose_determined, rigid_notes);
-    };
-    std::optional<PartialSurfaceMethod> adjoint;
-    if (s.method == "adjoint") {
-        // The adjoint answer shares nothing with the halves and the rigid starts, and its solves run
-        // on one core: the two run side by side (issue 56's time: on the public liver 7.9 s of
-        // adjoint followed 2.5 s of halves and rigid starts). Nested regions inside run on their
-        // section's thread alone; only the baselines' side reports progress.
-        report(0.75, "adjoint registration, beside the cloud halves and the rigid baselines");
-        std::exception_ptr adjoint_error, baselines_error;
-#pragma omp parallel sections num_threads(2)
-        {
-#pragma omp section
-            {
-                try {
-                    adjoint = run_adjoint(c, matcher, options, E, s, springs_everywhere ? held.stiffness : 0.0, {});
-                } catch (...) {
-                    adjoint_error = std::current_exception();
-                }
-            }
-#pragma omp section
-            {
-                try {
-                    halves_and_rigid();
-                } catch (...) {
-                    baselines_error = std::current_exception();
-                }
-            }
-        }
-        if (baselines_error) std::rethrow_exception(baselines_error);
-        if (adjoint_error) std::rethrow_exception(adjoint_error);
-    } else {
-        halves_and_rigid();
-    }
-    methods.push_back({"biomechanical", b.displacement_mm, b.seconds, biomechanical_details(b)});
-    methods.back().details["support"] = held.name;
-    if (adjoint) methods.push_back(std::move(*adjoint));
+    const MethodRuns runs = run_methods(c, s, model, matcher, options, held, b, E, judges, report, methods);
+    const json& uncertainty = runs.uncertainty;
+    const bool rigid_pose_determined = runs.rigid_pose_determined;
+    const std::vector<std::string>& rigid_notes = runs.rigid_notes;
 
     // 5. Evaluation.
     report(0.92, "evaluation");
