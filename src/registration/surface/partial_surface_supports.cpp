@@ -200,9 +200,10 @@ double spring_stiffness_n_per_mm(const PartialSurfaceCase& c, const PartialSurfa
 }
 
 /// The hypotheses to try, the most constrained first. An explicit --support gives one (with the
-/// named supports added, as before); auto offers the named supports, the posterior surface only in a
-/// patient frame (a label volume's LPS space: elsewhere nothing says which side is posterior) and
-/// springs at every node (BCF-FEM's way); the free model only when asked (--support none).
+/// named supports added, as before); auto offers the named supports, the surface the cloud shows
+/// unmoved (still_supports), the posterior surface only in a patient frame (a label volume's LPS
+/// space: elsewhere nothing says which side is posterior) and springs at every node (BCF-FEM's way);
+/// the free model only when asked (--support none).
 std::vector<SupportHypothesis> support_hypotheses(const PartialSurfaceCase& c, const PartialSurfaceSettings& s, const LoadRegion& load)
 {
     std::vector<SupportHypothesis> out;
