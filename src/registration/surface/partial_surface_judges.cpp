@@ -34,6 +34,7 @@
 #include <optional>
 #include <random>
 #include <array>
+#include <exception>
 #include <set>
 #include <sstream>
 
@@ -212,6 +213,7 @@ json cloud_halves_check(const PartialSurfaceCase& c, const PartialSurfaceSetting
     report(0.75, "uncertainty: the cloud's two halves, side by side");
     std::array<std::vector<double>, 2> u;
     std::array<std::string, 2> failed;
+    std::array<std::exception_ptr, 2> crashed; // anything but an Error leaves the region and is rethrown
 #pragma omp parallel for schedule(static, 1) num_threads(2)
     for (int h = 0; h < 2; ++h) {
         SurfaceRegistrationOptions half_options = options;
@@ -221,8 +223,12 @@ json cloud_halves_check(const PartialSurfaceCase& c, const PartialSurfaceSetting
                 register_surface_biomechanical(model, matcher, halves[static_cast<std::size_t>(h)], half_options, [](double, const std::string&) {}).displacement_mm;
         } catch (const Error& e) {
             failed[static_cast<std::size_t>(h)] = e.what();
+        } catch (...) {
+            crashed[static_cast<std::size_t>(h)] = std::current_exception();
         }
     }
+    for (const auto& e : crashed)
+        if (e) std::rethrow_exception(e);
     for (int h = 0; h < 2; ++h) {
         if (failed[static_cast<std::size_t>(h)].empty()) continue;
         // A half that fails is numerical trouble, not bad input (issue 46 item 2): the check is left

@@ -35,6 +35,7 @@
 #include <optional>
 #include <random>
 #include <array>
+#include <exception>
 #include <set>
 #include <sstream>
 
