@@ -253,6 +253,20 @@ def test_paper001_the_cloud_shows_where_the_organ_did_not_move(surface_in_memory
     assert tre[r.method] < 0.6 * tre["at_rest"], tre
 
 
+def _moved_rigidly(surface_through_the_command, shift, front_only, patient_frame=True):
+    """A case in a patient frame whose cloud is the model's surface (or its front, LPS −y) moved by
+    `shift` mm, with 12 interior nodes as landmarks whose truth is the same rigid motion."""
+    out, _ = surface_through_the_command
+    model = physreg.SurfaceModel.from_mesh(physreg.read_mesh(out / "mesh.vtu"))
+    nodes = model.mesh.nodes
+    surface = np.unique(model.surface_triangles)
+    seen = surface[nodes[surface, 1] < np.median(nodes[surface, 1])] if front_only else surface
+    inside = np.setdiff1d(np.arange(len(nodes)), surface)[::5][:12]
+    rest = {f"n{i}": tuple(nodes[i]) for i in inside}
+    truth = {f"n{i}": tuple(nodes[i] + np.asarray(shift)) for i in inside}
+    return physreg.PartialSurfaceCase(model, nodes[seen] + np.asarray(shift), landmarks=rest, truth=truth, patient_frame=patient_frame)
+
+
 def test_paper001_a_support_that_needs_more_strain_energy_to_fit_a_patch_gives_way(surface_through_the_command):
     """Issue 56 item 3: the forces that fit a patch are not equally plausible under every support. The
     cloud is the model's front moved 6 mm to the patient's left, the whole organ with it (the truth is
@@ -261,16 +275,7 @@ def test_paper001_a_support_that_needs_more_strain_energy_to_fit_a_patch_gives_w
     both are tried (the posterior guess no longer ends the search once it fits), and the springs win
     by their energy: their run places the interior closer. (What is written is then the safeguard's
     call: here the model at rest, as the rigid and deformable answers fit alike 2.4 mm apart.)"""
-    out, _ = surface_through_the_command
-    model = physreg.SurfaceModel.from_mesh(physreg.read_mesh(out / "mesh.vtu"))
-    nodes = model.mesh.nodes
-    surface = np.unique(model.surface_triangles)
-    front = surface[nodes[surface, 1] < np.median(nodes[surface, 1])]  # LPS: anterior is −y
-    shift = np.array([6.0, 0.0, 0.0])
-    inside = np.setdiff1d(np.arange(len(nodes)), surface)[::5][:12]
-    rest = {f"n{i}": tuple(nodes[i]) for i in inside}
-    truth = {f"n{i}": tuple(nodes[i] + shift) for i in inside}
-    case = physreg.PartialSurfaceCase(model, nodes[front] + shift, landmarks=rest, truth=truth, patient_frame=True)
+    case = _moved_rigidly(surface_through_the_command, [6.0, 0.0, 0.0], front_only=True)
     r = physreg.register_partial_surface(case, **SURFACE)
     decision = r.summary["support_hypotheses"]
     tried = {h["name"]: h for h in decision["hypotheses"]}
@@ -292,15 +297,7 @@ def test_paper001_supports_the_data_contradict_are_left_out(surface_through_the_
     0.18 mm and 0.79 mm). In a patient frame the posterior hypothesis is tried first, fits worse than a
     looser one by more than the data resolve, and is left out with a note naming it; the looser
     answer follows the motion inside the organ. Outside a patient frame it is not offered at all."""
-    out, _ = surface_through_the_command
-    model = physreg.SurfaceModel.from_mesh(physreg.read_mesh(out / "mesh.vtu"))
-    nodes = model.mesh.nodes
-    surface = np.unique(model.surface_triangles)
-    shift = np.array([10.0, 0.0, 0.0])
-    inside = np.setdiff1d(np.arange(len(nodes)), surface)[::5][:12]
-    rest = {f"n{i}": tuple(nodes[i]) for i in inside}
-    truth = {f"n{i}": tuple(nodes[i] + shift) for i in inside}
-    case = physreg.PartialSurfaceCase(model, nodes[surface] + shift, landmarks=rest, truth=truth, patient_frame=True)
+    case = _moved_rigidly(surface_through_the_command, [10.0, 0.0, 0.0], front_only=False)
     r = physreg.register_partial_surface(case, **SURFACE)
     decision = r.summary["support_hypotheses"]
     tried = {h["name"]: h for h in decision["hypotheses"]}
@@ -317,7 +314,7 @@ def test_paper001_supports_the_data_contradict_are_left_out(surface_through_the_
     assert methods["at_rest"]["tre"]["all"]["mean_mm"] == pytest.approx(10.0)
     assert methods["biomechanical"]["tre"]["all"]["mean_mm"] <= 1.5, methods["biomechanical"]["tre"]
     assert tried["posterior"]["tre"]["all"]["mean_mm"] > 2.0 * methods["biomechanical"]["tre"]["all"]["mean_mm"]
-    free = physreg.register_partial_surface(physreg.PartialSurfaceCase(model, nodes[surface] + shift), **SURFACE)
+    free = physreg.register_partial_surface(_moved_rigidly(surface_through_the_command, [10.0, 0.0, 0.0], front_only=False, patient_frame=False), **SURFACE)
     assert "posterior" not in [h["name"] for h in free.summary["support_hypotheses"]["hypotheses"]]
 
 
