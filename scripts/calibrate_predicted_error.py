@@ -12,9 +12,11 @@
 #
 # Usage:
 #   calibrate_predicted_error.py fit   STUDY_WORK_DIR STUDY_JSON [--rows default,supports] > calibration.json
-#   calibrate_predicted_error.py check STUDY_WORK_DIR STUDY_JSON [--rows default,supports]
+#   calibrate_predicted_error.py check STUDY_WORK_DIR STUDY_JSON [--rows default,supports] [--calibration FIT.json]
 # "check" reads the predicted error register-surface itself wrote (summary.predicted_error) and
-# reports Spearman against the true TRE and the interval's coverage.
+# reports Spearman against the true TRE and the interval's coverage. With --calibration (the output
+# of "fit"), the prediction is recomputed from each run's strain energy with those factors instead:
+# what a binary built with them writes (evaluation/predicted_error.cpp, the same formula).
 import argparse
 import json
 import os
@@ -77,6 +79,7 @@ def main():
     p.add_argument("work")
     p.add_argument("study_json")
     p.add_argument("--rows", default="default,supports")
+    p.add_argument("--calibration", help="check: a fit's JSON; the prediction recomputed with its factors")
     a = p.parse_args()
     study = json.load(open(a.study_json))
     recs = records(a.work, study, a.rows.split(","))
@@ -103,6 +106,15 @@ def main():
         json.dump(out, sys.stdout, indent=1)
         print()
         return
+    if a.calibration:
+        fit = json.load(open(a.calibration))
+        for r in recs:
+            if r["summary"].get("predicted_error", {}).get("mean_mm") is None:
+                continue  # the binary states none for this run
+            c = fit["regimes"][r["regime"]]
+            mean = c["factor"] * energy_scale_mm(r["energy_mj"], r["summary"]["model"]["young_modulus_pa"], fit["volume_mm3"])
+            r["summary"]["predicted_error"] = {"mean_mm": mean, "interval_mm": [c["interval_factors"][0] * mean, c["interval_factors"][1] * mean],
+                                               "interval_coverage": 0.8}
     report = {}
     for regime in ("springs", "held", "all"):
         sel = [r for r in recs if (regime == "all" or r["regime"] == regime) and r["summary"].get("predicted_error", {}).get("mean_mm") is not None]

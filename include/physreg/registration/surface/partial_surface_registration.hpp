@@ -40,7 +40,7 @@ struct PartialSurfaceSettings {
     double capsule_thickness = 0.1;           ///< mm
     std::string material = "healthy";         ///< healthy (3.5 kPa), cirrhotic (30 kPa)
     double young_modulus = 0.0;               ///< Pa; 0: from the material
-    double poisson = 0.45;
+    double poisson = 0.48;                    ///< nearly incompressible tissue (0.45 until issue 56: paper 001's value)
     double cell_size = 7.0;                   ///< mm
     double d90 = 5.0;                         ///< mm
     double traction = 0.5;                    ///< fraction of E

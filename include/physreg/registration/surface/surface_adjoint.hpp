@@ -28,7 +28,7 @@ namespace physreg {
 struct AdjointSurfaceOptions {
     MatchingOptions matching;
     double young_modulus_pa = 3500.0;
-    double poisson_ratio = 0.45;
+    double poisson_ratio = 0.48;                 ///< as register-surface's default (docs/registration.md, issue 56)
     std::vector<std::int32_t> fixed_nodes;       ///< held supports; empty: soft springs everywhere
     double support_stiffness_n_per_mm = 0.0;     ///< 0: fixed_nodes held; > 0: each tied to rest by springs of this stiffness
     /// The controls: nodes where forces may act (issue 56: the tool's contact region); empty:
