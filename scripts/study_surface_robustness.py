@@ -41,6 +41,9 @@ parser.add_argument("--physreg", default=os.path.join(ROOT, "build", "bin", "phy
 parser.add_argument("--cases", type=int, default=60)
 parser.add_argument("--seed", type=int, default=46)
 parser.add_argument("--no-docs", action="store_true")
+parser.add_argument("--shapes", default="small,msd",
+                    help="small (the small phantom) and/or msd (the MSD livers in ../shared/data); the tables since 2026-12-06 are "
+                         "--shapes small (run where ../shared was absent, which draws the same)")
 parser.add_argument("--only", default="", help="run only these cases (c11,c12,…): the same draws, the others skipped (phantoms cached in WORK_DIR/phantoms)")
 parser.add_argument("--report-only", action="store_true", help="redraw the tables and figure from WORK_DIR/study.json (cases run so far)")
 args = parser.parse_args()
@@ -53,8 +56,11 @@ CLOUDS = ["patch", "patch_holes", "patch_noisy_outliers", "push"]
 
 
 def shapes():
+    wanted = set(args.shapes.split(","))
+    if not wanted <= {"small", "msd"} or "small" not in wanted:
+        sys.exit(f"--shapes {args.shapes}: small, or small,msd")
     out = [("small", ["--preset", "small"], "2,3,4")]
-    for n in ("002", "008", "010"):
+    for n in ("002", "008", "010") if "msd" in wanted else ():
         path = os.path.join(SHARED, f"hepaticvessel_{n}_liver.nii.gz")
         if os.path.exists(path):
             out.append((f"msd{n}", ["--from-labels", path, "--label-roles", "liver=1", "--ground-truth-size", "7,18"], "1"))
